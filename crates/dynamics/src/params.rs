@@ -1,0 +1,446 @@
+//! Parameter sets: vehicles, tyres and the contact law, loaded from TOML and validated.
+//!
+//! A parameter file has three tables, `[bullet]`, `[target]` (each a [`VehicleParams`] with
+//! a `[*.tyre]` sub-table) and `[contact]` ([`ContactParams`]). Unknown fields are refused,
+//! missing fields are refused, and every value is checked for range and finiteness; the
+//! error names the field (`target.tyre.pdy1`). Two sets are built in and embedded in the
+//! binary: `full_size` and `half_scale` (see `crates/dynamics/params/*.toml` for the
+//! source of every value).
+
+use crate::error::ParamError;
+use crate::GRAVITY;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Magic Formula tyre coefficients (MF-Tyre naming, pure and combined slip, load
+/// sensitivity). Camber, shifts and aligning moment are not modelled.
+///
+/// Sign convention: all stiffness and friction coefficients are given as positive
+/// magnitudes; the model applies forces against the slip.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TyreParams {
+    /// Nominal load F_z0 (N).
+    pub fz0: f64,
+    /// Longitudinal shape factor C_x.
+    pub pcx1: f64,
+    /// Longitudinal friction μ_x at F_z0.
+    pub pdx1: f64,
+    /// Variation of μ_x with load (per unit dfz).
+    pub pdx2: f64,
+    /// Longitudinal curvature E_x.
+    pub pex1: f64,
+    /// Longitudinal slip stiffness K_x / F_z at F_z0.
+    pub pkx1: f64,
+    /// Variation of K_x / F_z with load.
+    pub pkx2: f64,
+    /// Exponent in K_x / F_z with load.
+    pub pkx3: f64,
+    /// Lateral shape factor C_y.
+    pub pcy1: f64,
+    /// Lateral friction μ_y at F_z0.
+    pub pdy1: f64,
+    /// Variation of μ_y with load (per unit dfz).
+    pub pdy2: f64,
+    /// Lateral curvature E_y.
+    pub pey1: f64,
+    /// Maximum cornering stiffness K_y / F_z0.
+    pub pky1: f64,
+    /// Load (in units of F_z0) at which K_y peaks.
+    pub pky2: f64,
+    /// Combined slip: slope factor of the F_x reduction with α.
+    pub rbx1: f64,
+    /// Combined slip: variation of that slope with κ.
+    pub rbx2: f64,
+    /// Combined slip: shape factor of the F_x reduction.
+    pub rcx1: f64,
+    /// Combined slip: slope factor of the F_y reduction with κ.
+    pub rby1: f64,
+    /// Combined slip: variation of that slope with α.
+    pub rby2: f64,
+    /// Combined slip: shape factor of the F_y reduction.
+    pub rcy1: f64,
+}
+
+/// One vehicle: mass and inertia, geometry, suspension, wheels, drivetrain, actuators, tyres.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VehicleParams {
+    /// Free-text name (e.g. the source vehicle).
+    pub name: String,
+    /// Total mass m (kg).
+    pub mass: f64,
+    /// Sprung mass m_s (kg), ≤ m.
+    pub sprung_mass: f64,
+    /// Yaw inertia of the whole vehicle about its c.g. (kg m²).
+    pub iz: f64,
+    /// Roll inertia of the sprung mass about its own c.g. (kg m²).
+    pub ix_sprung: f64,
+    /// Pitch inertia of the sprung mass about its own c.g. (kg m²).
+    pub iy_sprung: f64,
+    /// c.g. to front axle (m).
+    pub lf: f64,
+    /// c.g. to rear axle (m).
+    pub lr: f64,
+    /// Front and rear track widths (m).
+    pub track_front: f64,
+    pub track_rear: f64,
+    /// Height of the total c.g. above ground (m).
+    pub h_cg: f64,
+    /// Height of the sprung-mass c.g. above ground (m).
+    pub h_sprung: f64,
+    /// Height of the roll axis under the c.g. (m), below `h_sprung`.
+    pub h_roll_axis: f64,
+    /// Body length, width and height (m).
+    pub length: f64,
+    pub width: f64,
+    pub height: f64,
+    /// Distance from the c.g. forward to the front bumper (m); the rear bumper is at
+    /// `length − cg_to_front` behind the c.g.
+    pub cg_to_front: f64,
+    /// Height of the bumper / contact line above ground (m).
+    pub bumper_height: f64,
+    /// Roll stiffness and damping per axle (N m/rad, N m s/rad).
+    pub roll_stiffness_front: f64,
+    pub roll_stiffness_rear: f64,
+    pub roll_damping_front: f64,
+    pub roll_damping_rear: f64,
+    /// Pitch stiffness and damping (N m/rad, N m s/rad).
+    pub pitch_stiffness: f64,
+    pub pitch_damping: f64,
+    /// Effective rolling radius R_w (m) and spin inertia of one wheel (kg m²).
+    pub wheel_radius: f64,
+    pub wheel_inertia: f64,
+    /// Drivetrain efficiency η_d and gear ratio i_g from T_r to the driven (rear) axle.
+    pub drive_efficiency: f64,
+    pub gear_ratio: f64,
+    /// Steering: |δ| ≤ steer_max (rad), |δ̇| ≤ steer_rate_max (rad/s), first-order lag (s).
+    pub steer_max: f64,
+    pub steer_rate_max: f64,
+    pub steer_time_constant: f64,
+    /// Drive torque T_r limits before the gear (N m): `drive_torque_min ≤ T_r ≤ drive_torque_max`
+    /// (negative values brake through the drivetrain), and its first-order lag (s).
+    pub drive_torque_max: f64,
+    pub drive_torque_min: f64,
+    pub torque_time_constant: f64,
+    /// Service brake: total brake torque at the wheels (N m) and front share.
+    pub brake_torque_max: f64,
+    pub brake_bias_front: f64,
+    /// Tyres (all four alike).
+    pub tyre: TyreParams,
+}
+
+/// The compliant contact law between two bodies (Hunt–Crossley normal force, regularised
+/// Coulomb friction): `F_n = max(0, k δⁿ (1 + c δ̇))`, `F_t = −μ_c F_n tanh(v_t / v_s)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactParams {
+    /// k (N/mⁿ).
+    pub stiffness: f64,
+    /// n (−), 1 for a linear crush spring, 1.5 for Hertz.
+    pub exponent: f64,
+    /// c (s/m): Hunt–Crossley damping factor; c ≈ 1.5 (1 − e) / v_impact for restitution e.
+    pub damping: f64,
+    /// μ_c: body-panel friction.
+    pub friction: f64,
+    /// v_s (m/s): slip speed of the friction regularisation.
+    pub slip_speed: f64,
+    /// Stiffness multiplier for contact with obstacles (rigid barriers are stiffer).
+    pub obstacle_stiffness_factor: f64,
+}
+
+/// A complete parameter set for a two-vehicle PIT simulation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParamSet {
+    pub bullet: VehicleParams,
+    pub target: VehicleParams,
+    pub contact: ContactParams,
+}
+
+const FULL_SIZE: &str = include_str!("../params/full_size.toml");
+const HALF_SCALE: &str = include_str!("../params/half_scale.toml");
+
+impl ParamSet {
+    /// Names of the built-in sets.
+    pub const BUILTIN: [&'static str; 2] = ["full_size", "half_scale"];
+
+    /// A built-in set by name (`full_size` or `half_scale`).
+    pub fn builtin(name: &str) -> Result<Self, ParamError> {
+        match name {
+            "full_size" => Self::from_toml_str(FULL_SIZE, "full_size"),
+            "half_scale" => Self::from_toml_str(HALF_SCALE, "half_scale"),
+            other => Err(ParamError::UnknownSet(other.to_owned())),
+        }
+    }
+
+    /// The TOML source of a built-in set.
+    pub fn builtin_source(name: &str) -> Result<&'static str, ParamError> {
+        match name {
+            "full_size" => Ok(FULL_SIZE),
+            "half_scale" => Ok(HALF_SCALE),
+            other => Err(ParamError::UnknownSet(other.to_owned())),
+        }
+    }
+
+    /// A built-in set name or a path to a TOML file.
+    pub fn load(name_or_path: &str) -> Result<Self, ParamError> {
+        if Self::BUILTIN.contains(&name_or_path) {
+            Self::builtin(name_or_path)
+        } else {
+            Self::from_file(Path::new(name_or_path))
+        }
+    }
+
+    /// Parse and validate a TOML file.
+    pub fn from_file(path: &Path) -> Result<Self, ParamError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ParamError::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        Self::from_toml_str(&text, &path.display().to_string())
+    }
+
+    /// Parse and validate TOML text; `source_name` appears in error messages.
+    pub fn from_toml_str(text: &str, source_name: &str) -> Result<Self, ParamError> {
+        let set: Self = toml::from_str(text).map_err(|e| ParamError::Parse {
+            source_name: source_name.to_owned(),
+            message: e.to_string().trim_end().to_owned(),
+        })?;
+        set.validate()?;
+        Ok(set)
+    }
+
+    /// Serialise to TOML (round-trips through [`ParamSet::from_toml_str`]).
+    #[must_use]
+    pub fn to_toml_string(&self) -> String {
+        toml::to_string(self).expect("parameter sets always serialise")
+    }
+
+    /// Check every field; the error names the first offending field.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        self.bullet.validate("bullet")?;
+        self.target.validate("target")?;
+        self.contact.validate("contact")
+    }
+}
+
+/// Range rules for one field.
+enum Rule {
+    Positive,
+    NonNegative,
+    Finite,
+    Fraction,
+    AtMostOne,
+}
+
+fn check(prefix: &str, name: &str, value: f64, rule: Rule) -> Result<(), ParamError> {
+    let bad = |reason: &'static str| {
+        Err(ParamError::Invalid { field: format!("{prefix}.{name}"), value, reason })
+    };
+    if !value.is_finite() {
+        return bad("must be finite");
+    }
+    match rule {
+        Rule::Positive if value <= 0.0 => bad("must be positive"),
+        Rule::NonNegative if value < 0.0 => bad("must not be negative"),
+        Rule::Fraction if !(0.0..=1.0).contains(&value) => bad("must lie in [0, 1]"),
+        Rule::AtMostOne if value > 1.0 => bad("must be at most 1 (Magic Formula curvature)"),
+        _ => Ok(()),
+    }
+}
+
+macro_rules! rules {
+    ($prefix:expr, $s:expr, { $($field:ident : $rule:ident),* $(,)? }) => {{
+        $( check($prefix, stringify!($field), $s.$field, Rule::$rule)?; )*
+    }};
+}
+
+impl TyreParams {
+    pub fn validate(&self, prefix: &str) -> Result<(), ParamError> {
+        rules!(prefix, self, {
+            fz0: Positive, pcx1: Positive, pdx1: Positive, pdx2: Finite, pex1: AtMostOne,
+            pkx1: Positive, pkx2: Finite, pkx3: Finite, pcy1: Positive, pdy1: Positive,
+            pdy2: Finite, pey1: AtMostOne, pky1: Positive, pky2: Positive, rbx1: Positive,
+            rbx2: Finite, rcx1: Positive, rby1: Positive, rby2: Finite, rcy1: Positive,
+        });
+        Ok(())
+    }
+
+    /// Peak friction scale so that the lateral peak at nominal load equals the road μ.
+    #[inline]
+    #[must_use]
+    pub fn mu_scale(&self, road_mu: f64) -> f64 {
+        road_mu / self.pdy1
+    }
+
+    /// Load-dependent cornering stiffness K_y(F_z) (N/rad) of one tyre.
+    #[inline]
+    #[must_use]
+    pub fn cornering_stiffness(&self, fz: f64) -> f64 {
+        self.pky1 * self.fz0 * (2.0 * (fz / (self.pky2 * self.fz0)).atan()).sin()
+    }
+}
+
+impl VehicleParams {
+    pub fn validate(&self, prefix: &str) -> Result<(), ParamError> {
+        rules!(prefix, self, {
+            mass: Positive, sprung_mass: Positive, iz: Positive, ix_sprung: Positive,
+            iy_sprung: Positive, lf: Positive, lr: Positive, track_front: Positive,
+            track_rear: Positive, h_cg: Positive, h_sprung: Positive, h_roll_axis: NonNegative,
+            length: Positive, width: Positive, height: Positive, cg_to_front: Positive,
+            bumper_height: Positive, roll_stiffness_front: Positive, roll_stiffness_rear: Positive,
+            roll_damping_front: NonNegative, roll_damping_rear: NonNegative,
+            pitch_stiffness: Positive, pitch_damping: NonNegative, wheel_radius: Positive,
+            wheel_inertia: Positive, drive_efficiency: Fraction, gear_ratio: Positive,
+            steer_max: Positive, steer_rate_max: Positive, steer_time_constant: NonNegative,
+            drive_torque_max: NonNegative, drive_torque_min: Finite,
+            torque_time_constant: NonNegative, brake_torque_max: NonNegative,
+            brake_bias_front: Fraction,
+        });
+        let invalid = |field: &str, value: f64, reason: &'static str| {
+            Err(ParamError::Invalid { field: format!("{prefix}.{field}"), value, reason })
+        };
+        if self.sprung_mass > self.mass {
+            return invalid("sprung_mass", self.sprung_mass, "must not exceed mass");
+        }
+        if self.drive_torque_min > 0.0 {
+            return invalid("drive_torque_min", self.drive_torque_min, "must not be positive");
+        }
+        if self.h_roll_axis >= self.h_sprung {
+            return invalid("h_roll_axis", self.h_roll_axis, "must lie below h_sprung");
+        }
+        if self.cg_to_front >= self.length {
+            return invalid("cg_to_front", self.cg_to_front, "must be shorter than length");
+        }
+        if self.cg_to_front < self.lf {
+            return invalid("cg_to_front", self.cg_to_front, "the front axle must lie inside the body");
+        }
+        if self.length - self.cg_to_front < self.lr {
+            return invalid("length", self.length, "the rear axle must lie inside the body");
+        }
+        if self.steer_max >= 1.4 {
+            return invalid("steer_max", self.steer_max, "must be below 1.4 rad");
+        }
+        // The roll and pitch modes must be statically stable (spring beats gravity).
+        let ms_g_h_roll = self.sprung_mass * GRAVITY * (self.h_sprung - self.h_roll_axis);
+        if self.roll_stiffness_front + self.roll_stiffness_rear <= ms_g_h_roll {
+            return invalid(
+                "roll_stiffness_front",
+                self.roll_stiffness_front,
+                "total roll stiffness must exceed m_s g h (statically unstable roll)",
+            );
+        }
+        if self.pitch_stiffness <= self.sprung_mass * GRAVITY * self.h_sprung {
+            return invalid("pitch_stiffness", self.pitch_stiffness, "must exceed m_s g h_sprung");
+        }
+        self.tyre.validate(&format!("{prefix}.tyre"))
+    }
+
+    /// Wheelbase L = l_f + l_r (m).
+    #[inline]
+    #[must_use]
+    pub fn wheelbase(&self) -> f64 {
+        self.lf + self.lr
+    }
+
+    /// Static axle loads (front, rear) in N.
+    #[must_use]
+    pub fn static_axle_loads(&self) -> (f64, f64) {
+        let w = self.mass * GRAVITY;
+        let l = self.wheelbase();
+        (w * self.lr / l, w * self.lf / l)
+    }
+
+    /// Rear-axle longitudinal force per unit drive torque: η_d i_g / R_w (1/m).
+    #[inline]
+    #[must_use]
+    pub fn drive_force_gain(&self) -> f64 {
+        self.drive_efficiency * self.gear_ratio / self.wheel_radius
+    }
+
+    /// Roll arm: sprung c.g. above the roll axis (m).
+    #[inline]
+    #[must_use]
+    pub fn roll_arm(&self) -> f64 {
+        self.h_sprung - self.h_roll_axis
+    }
+}
+
+impl ContactParams {
+    pub fn validate(&self, prefix: &str) -> Result<(), ParamError> {
+        rules!(prefix, self, {
+            stiffness: Positive, exponent: Positive, damping: NonNegative, friction: NonNegative,
+            slip_speed: Positive, obstacle_stiffness_factor: Positive,
+        });
+        if !(1.0..=2.0).contains(&self.exponent) {
+            return Err(ParamError::Invalid {
+                field: format!("{prefix}.exponent"),
+                value: self.exponent,
+                reason: "must lie in [1, 2]",
+            });
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtin_sets_load_and_validate() {
+        for name in ParamSet::BUILTIN {
+            let set = ParamSet::builtin(name).unwrap();
+            set.validate().unwrap();
+            let back = ParamSet::from_toml_str(&set.to_toml_string(), "roundtrip").unwrap();
+            assert_eq!(set, back);
+        }
+    }
+
+    #[test]
+    fn unknown_set_is_refused() {
+        assert!(matches!(ParamSet::builtin("monster_truck"), Err(ParamError::UnknownSet(_))));
+    }
+
+    fn replace_line(src: &str, table: &str, key: &str, new_line: Option<&str>) -> String {
+        // Replace (or delete) `key = …` inside `[table]`.
+        let mut out = String::new();
+        let mut current = String::new();
+        for line in src.lines() {
+            let t = line.trim();
+            if t.starts_with('[') {
+                current = t.trim_matches(|c| c == '[' || c == ']').to_owned();
+            }
+            let is_key = t.split('=').next().map(str::trim) == Some(key) && t.contains('=');
+            if current == table && is_key {
+                if let Some(n) = new_line {
+                    out.push_str(n);
+                    out.push('\n');
+                }
+                continue;
+            }
+            out.push_str(line);
+            out.push('\n');
+        }
+        out
+    }
+
+    #[test]
+    fn bad_fields_are_named() {
+        let src = ParamSet::builtin_source("full_size").unwrap();
+        let cases = [
+            ("target", "mass", None, "mass"),
+            ("target", "mass", Some("mass = -3.0"), "target.mass"),
+            ("bullet", "iz", Some("iz = nan"), "bullet.iz"),
+            ("bullet.tyre", "pdy1", Some("pdy1 = inf"), "bullet.tyre.pdy1"),
+            ("contact", "damping", Some("damping = -1.0\nwobble = 2.0"), "wobble"),
+            ("target", "brake_bias_front", Some("brake_bias_front = 1.5"), "target.brake_bias_front"),
+        ];
+        for (table, key, line, expect) in cases {
+            let text = replace_line(src, table, key, line);
+            let err = ParamSet::from_toml_str(&text, "test.toml").unwrap_err().to_string();
+            assert!(err.contains(expect), "error for {table}.{key} was {err:?}, wanted {expect:?}");
+        }
+    }
+}

@@ -1,0 +1,216 @@
+//! The Magic Formula tyre model (Pacejka), pure and combined slip with load sensitivity.
+//!
+//! Slip conventions (ours, uniform across the crate):
+//! * longitudinal slip `κ = (ω R_w − v_x) / max(|v_x|, v_low)`, force `F_x = +MF_x(κ)`;
+//! * slip angle `α = atan(v_y / sqrt(v_x² + v_low²))` in the wheel frame, force
+//!   `F_y = −MF_y(α)` (the force opposes the lateral sliding velocity, for any travel
+//!   direction, including a spinning vehicle sliding sideways or backwards).
+//!
+//! The road adhesion μ scales the peak: `λ_μ = μ / p_dy1`, so that at nominal load the
+//! lateral peak friction equals μ. Cornering and slip stiffness do not depend on μ.
+
+use crate::params::TyreParams;
+
+/// The Magic Formula `y = D sin(C atan(B x − E (B x − atan(B x))))`.
+#[inline]
+#[must_use]
+pub fn magic_formula(x: f64, b: f64, c: f64, d: f64, e: f64) -> f64 {
+    let bx = b * x;
+    d * (c * (bx - e * (bx - bx.atan())).atan()).sin()
+}
+
+/// The Magic Formula and its derivative with respect to `x`.
+#[inline]
+#[must_use]
+pub fn magic_formula_d(x: f64, b: f64, c: f64, d: f64, e: f64) -> (f64, f64) {
+    let bx = b * x;
+    let inner = bx - e * (bx - bx.atan());
+    // d inner / dx = B (1 − E + E / (1 + (Bx)²))
+    let dinner = b * (1.0 - e + e / (1.0 + bx * bx));
+    let phi = c * inner.atan();
+    let (s, co) = phi.sin_cos();
+    (d * s, d * co * c * dinner / (1.0 + inner * inner))
+}
+
+/// A lateral force curve of one axle for the control-oriented models: the Magic Formula
+/// with coefficients fixed at the static axle load and the road μ.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxleCurve {
+    pub b: f64,
+    pub c: f64,
+    pub d: f64,
+    pub e: f64,
+}
+
+impl AxleCurve {
+    /// The curve of an axle with two tyres carrying `fz_axle` in total on a road of
+    /// adhesion `mu`. Peak `D = μ_y F_z,axle`, cornering stiffness `2 K_y(F_z,axle / 2)`.
+    #[must_use]
+    pub fn new(tyre: &TyreParams, fz_axle: f64, mu: f64) -> Self {
+        let fz = 0.5 * fz_axle;
+        let dfz = (fz - tyre.fz0) / tyre.fz0;
+        let mu_y = tyre.mu_scale(mu) * (tyre.pdy1 + tyre.pdy2 * dfz);
+        let d = mu_y * fz_axle;
+        let k = 2.0 * tyre.cornering_stiffness(fz);
+        let c = tyre.pcy1;
+        Self { b: k / (c * d), c, d, e: tyre.pey1 }
+    }
+
+    /// Cornering stiffness B C D at zero slip (N/rad).
+    #[inline]
+    #[must_use]
+    pub fn cornering_stiffness(&self) -> f64 {
+        self.b * self.c * self.d
+    }
+
+    /// Lateral force for slip angle α (our convention: `F_y = −MF(α)`).
+    #[inline]
+    #[must_use]
+    pub fn force(&self, alpha: f64) -> f64 {
+        -magic_formula(alpha, self.b, self.c, self.d, self.e)
+    }
+
+    /// Lateral force and dF_y/dα.
+    #[inline]
+    #[must_use]
+    pub fn force_d(&self, alpha: f64) -> (f64, f64) {
+        let (f, df) = magic_formula_d(alpha, self.b, self.c, self.d, self.e);
+        (-f, -df)
+    }
+}
+
+/// Forces of one tyre under combined slip.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TyreForces {
+    /// Longitudinal force in the wheel frame (N).
+    pub fx: f64,
+    /// Lateral force in the wheel frame (N).
+    pub fy: f64,
+    /// Longitudinal slip stiffness K_x at this load (N per unit slip), used by the plant's
+    /// implicit wheel-spin update.
+    pub kx: f64,
+}
+
+/// Magic Formula with combined slip and load sensitivity (MF-Tyre 5.2 / 6.1 structure
+/// without camber, shifts or aligning moment).
+///
+/// Combined slip uses the cosine weighting functions
+/// `G_xα = cos(r_Cx1 atan(B_xα α))`, `B_xα = r_Bx1 cos(atan(r_Bx2 κ))` and
+/// `G_yκ = cos(r_Cy1 atan(B_yκ κ))`, `B_yκ = r_By1 cos(atan(r_By2 α))`;
+/// the weighting's argument is capped at π/2 so that a tyre sliding at large slip keeps
+/// a non-negative force share (the fitted weighting goes negative far outside its data).
+#[must_use]
+pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: f64) -> TyreForces {
+    if fz <= 0.0 {
+        return TyreForces::default();
+    }
+    let dfz = (fz - t.fz0) / t.fz0;
+    // Pure longitudinal slip.
+    let kx = fz * (t.pkx1 + t.pkx2 * dfz) * (t.pkx3 * dfz).exp();
+    let dx = mu_scale * (t.pdx1 + t.pdx2 * dfz).max(0.05) * fz;
+    let bx = kx / (t.pcx1 * dx);
+    let fx0 = magic_formula(kappa, bx, t.pcx1, dx, t.pex1);
+    // Pure lateral slip.
+    let ky = t.cornering_stiffness(fz);
+    let dy = mu_scale * (t.pdy1 + t.pdy2 * dfz).max(0.05) * fz;
+    let by = ky / (t.pcy1 * dy);
+    let fy0 = -magic_formula(alpha, by, t.pcy1, dy, t.pey1);
+    // Combined-slip weighting.
+    let bxa = t.rbx1 / (1.0 + (t.rbx2 * kappa).powi(2)).sqrt();
+    let gxa = (t.rcx1 * (bxa * alpha).abs().atan()).min(std::f64::consts::FRAC_PI_2).cos();
+    let byk = t.rby1 / (1.0 + (t.rby2 * alpha).powi(2)).sqrt();
+    let gyk = (t.rcy1 * (byk * kappa).abs().atan()).min(std::f64::consts::FRAC_PI_2).cos();
+    TyreForces { fx: fx0 * gxa, fy: fy0 * gyk, kx }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::ParamSet;
+
+    fn tyre() -> TyreParams {
+        ParamSet::builtin("full_size").unwrap().target.tyre
+    }
+
+    #[test]
+    fn mf_peak_equals_d_and_slope_equals_bcd() {
+        let (b, c, d, e) = (10.0, 1.35, 4000.0, -0.5);
+        // Initial slope B C D.
+        let h = 1e-7;
+        let slope = (magic_formula(h, b, c, d, e) - magic_formula(-h, b, c, d, e)) / (2.0 * h);
+        assert!((slope - b * c * d).abs() / (b * c * d) < 1e-6, "slope {slope}");
+        // The peak value is D (scan fine).
+        let peak = (0..200_000)
+            .map(|i| magic_formula(f64::from(i) * 1e-5, b, c, d, e))
+            .fold(f64::MIN, f64::max);
+        assert!((peak - d).abs() / d < 1e-6, "peak {peak}");
+        // Odd symmetry.
+        assert!((magic_formula(0.1, b, c, d, e) + magic_formula(-0.1, b, c, d, e)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn mf_derivative_matches_finite_difference() {
+        let (b, c, d, e) = (8.0, 1.6, 3000.0, 0.46);
+        for &x in &[-0.8, -0.2, -0.01, 0.0, 0.03, 0.15, 0.6] {
+            let h = 1e-6;
+            let fd = (magic_formula(x + h, b, c, d, e) - magic_formula(x - h, b, c, d, e)) / (2.0 * h);
+            let (_, an) = magic_formula_d(x, b, c, d, e);
+            assert!((fd - an).abs() <= 1e-5 * an.abs().max(1.0), "x={x} fd={fd} an={an}");
+        }
+    }
+
+    #[test]
+    fn tyre_peak_and_stiffness_follow_parameters() {
+        let t = tyre();
+        let mu = 0.9;
+        let fz = t.fz0;
+        // Lateral: initial slope equals K_y, peak equals μ F_z at nominal load.
+        let h = 1e-7;
+        let f = |a: f64| combined_slip(&t, t.mu_scale(mu), fz, 0.0, a).fy;
+        let slope = -(f(h) - f(-h)) / (2.0 * h);
+        let ky = t.cornering_stiffness(fz);
+        assert!((slope - ky).abs() / ky < 1e-6);
+        let peak = (0..20_000).map(|i| -f(f64::from(i) * 5e-5)).fold(f64::MIN, f64::max);
+        assert!((peak - mu * fz).abs() / (mu * fz) < 1e-6, "peak {peak} vs {}", mu * fz);
+        // Longitudinal: initial slope equals K_x = p_kx1 F_z at nominal load.
+        let g = |k: f64| combined_slip(&t, t.mu_scale(mu), fz, k, 0.0).fx;
+        let kslope = (g(h) - g(-h)) / (2.0 * h);
+        assert!((kslope - t.pkx1 * fz).abs() / (t.pkx1 * fz) < 1e-6);
+    }
+
+    #[test]
+    fn load_sensitivity_is_degressive() {
+        let t = tyre();
+        let s = t.mu_scale(1.0);
+        let f1 = -combined_slip(&t, s, t.fz0, 0.0, 0.3).fy / t.fz0;
+        let f2 = -combined_slip(&t, s, 2.0 * t.fz0, 0.0, 0.3).fy / (2.0 * t.fz0);
+        assert!(f2 < f1, "friction per unit load must fall with load: {f1} {f2}");
+    }
+
+    #[test]
+    fn combined_slip_reduces_lateral_force() {
+        let t = tyre();
+        let s = t.mu_scale(0.9);
+        let alpha = 0.05;
+        let pure = combined_slip(&t, s, t.fz0, 0.0, alpha).fy.abs();
+        let mut last = pure;
+        for &k in &[0.02, 0.05, 0.1, 0.3] {
+            let fy = combined_slip(&t, s, t.fz0, k, alpha).fy.abs();
+            assert!(fy < last, "|Fy| must fall as κ grows: κ={k} {fy} ≥ {last}");
+            last = fy;
+        }
+        // And lateral slip reduces the longitudinal force.
+        let fx0 = combined_slip(&t, s, t.fz0, 0.05, 0.0).fx;
+        let fx1 = combined_slip(&t, s, t.fz0, 0.05, 0.1).fx;
+        assert!(fx1 < fx0 && fx1 > 0.0);
+    }
+
+    #[test]
+    fn axle_curve_matches_tyres() {
+        let t = tyre();
+        let fz_axle = 2.0 * t.fz0;
+        let axle = AxleCurve::new(&t, fz_axle, 0.8);
+        let two = 2.0 * combined_slip(&t, t.mu_scale(0.8), t.fz0, 0.0, 0.07).fy;
+        assert!((axle.force(0.07) - two).abs() < 1e-9 * two.abs());
+    }
+}
