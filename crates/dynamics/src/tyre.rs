@@ -11,6 +11,19 @@
 
 use crate::params::TyreParams;
 
+/// Speed (m/s) below which slip denominators are regularised: `sqrt(v_x² + V_LOW²)` for the
+/// slip angle and `max(|v_x|, V_LOW)` for the slip ratio. Below it tyres act as dampers, so a
+/// vehicle comes to rest smoothly instead of chattering.
+pub const V_LOW: f64 = 0.5;
+
+/// Slip angle of a wheel moving with wheel-frame velocity `(vx, vy)`:
+/// `α = atan(v_y / sqrt(v_x² + V_LOW²))`.
+#[inline]
+#[must_use]
+pub fn slip_angle(vx: f64, vy: f64) -> f64 {
+    (vy / (vx * vx + V_LOW * V_LOW).sqrt()).atan()
+}
+
 /// The Magic Formula `y = D sin(C atan(B x − E (B x − atan(B x))))`.
 #[inline]
 #[must_use]
