@@ -126,6 +126,10 @@ pub struct VehicleParams {
     /// Service brake: total brake torque at the wheels (N m) and front share.
     pub brake_torque_max: f64,
     pub brake_bias_front: f64,
+    /// Rolling-resistance coefficient f_r (rolling-resistance torque f_r F_z R_w per wheel).
+    pub rolling_resistance: f64,
+    /// Aerodynamic drag area C_d A (m²); drag ½ ρ C_d A v².
+    pub drag_area: f64,
     /// Tyres (all four alike).
     pub tyre: TyreParams,
 }
@@ -296,7 +300,7 @@ impl VehicleParams {
             steer_max: Positive, steer_rate_max: Positive, steer_time_constant: NonNegative,
             drive_torque_max: NonNegative, drive_torque_min: Finite,
             torque_time_constant: NonNegative, brake_torque_max: NonNegative,
-            brake_bias_front: Fraction,
+            brake_bias_front: Fraction, rolling_resistance: NonNegative, drag_area: NonNegative,
         });
         let invalid = |field: &str, value: f64, reason: &'static str| {
             Err(ParamError::Invalid { field: format!("{prefix}.{field}"), value, reason })
