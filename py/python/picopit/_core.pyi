@@ -1,0 +1,137 @@
+"""Type stubs for picopit._core, the pyo3 extension (thin bindings to the Rust core).
+
+Array arguments accept anything numpy can convert to float64 of the stated shape; they are
+copied, and a wrong shape or a non-finite value raises ValueError naming the argument.
+Returned arrays are fresh float64 copies.
+"""
+
+from typing import Optional, Sequence, Tuple, TypedDict, Union
+
+import numpy as np
+import numpy.typing as npt
+
+_ArrayLike = Union[npt.ArrayLike, Sequence[float]]
+_F64 = npt.NDArray[np.float64]
+
+GRAVITY: float
+
+class ParamError(ValueError):
+    """A parameter set or parameter file that cannot be used; the message names the field."""
+
+def load_params(name_or_path: str) -> str:
+    """Load and validate a parameter set (built-in name or TOML path); returns it as TOML."""
+
+def builtin_param_sets() -> list[str]:
+    """Names of the built-in parameter sets (``full_size``, ``half_scale``)."""
+
+def footprint(pose: _ArrayLike, length: float, width: float, cg_to_front: float) -> _F64:
+    """Corners (4, 2) of a vehicle footprint with its c.g. at ``pose = [X, Y, yaw]``,
+    counter-clockwise from front-left."""
+
+def wrap_angle(a: float) -> float:
+    """Wrap an angle to (-pi, pi]."""
+
+class ContactDict(TypedDict):
+    fc: _F64
+    """[F_n, F_t] on the target in the contact frame (N); the bullet receives -fc."""
+    gamma: float
+    """World heading of the contact normal (bullet into target), rad."""
+    point_in_world: _F64
+    point_in_target: _F64
+    point_in_bullet: _F64
+    depth: float
+    """Penetration depth (m)."""
+
+class Plant:
+    """The high-fidelity two-vehicle simulator (the truth), fixed step ``dt``."""
+
+    def __init__(self, params: str = "full_size", mu: float = 0.9, dt: float = 1e-3) -> None: ...
+    def reset(self, bullet: _ArrayLike, target: _ArrayLike) -> None:
+        """Place both vehicles, each ``[X, Y, yaw, vx, vy, r]`` (c.g. position, body-frame
+        velocities); time restarts at 0."""
+    def set_commands(
+        self,
+        bullet_steer: float,
+        bullet_torque: float,
+        target_steer: float = 0.0,
+        target_brake: float = 0.0,
+    ) -> None:
+        """Driver commands held until changed: bullet front steer (rad), rear drive torque
+        T_r (N m); target front steer (rad), brake torque (N m, >= 0)."""
+    def advance(self, duration: float) -> None:
+        """Simulate ``duration`` seconds; the GIL is released meanwhile."""
+    def step(self) -> None:
+        """One integration step of ``dt``."""
+    @property
+    def time(self) -> float: ...
+    @property
+    def params(self) -> str: ...
+    def bullet_state(self) -> _F64:
+        """``[X, Y, yaw, vx, vy, r]``, shape (6,)."""
+    def target_state(self) -> _F64:
+        """``[vx, vy, yaw, r, p, phi, X, Y]`` (the paper's order), shape (8,)."""
+    def contact(self) -> Optional[ContactDict]:
+        """The current bullet-target contact, or None."""
+    def footprints(self) -> _F64:
+        """Corners, shape (2, 4, 2): [bullet, target] x 4 corners x [X, Y]."""
+
+class BulletModel:
+    """The bullet's single-track control model: state ``[X, Y, yaw, vx, vy, r]``, input
+    ``[delta_f, T_r]``, one RK4 step of ``dt`` per call."""
+
+    def __init__(
+        self, params: str = "full_size", mu: float = 0.9, dt: float = 0.05, vehicle: str = "bullet"
+    ) -> None: ...
+    @property
+    def dt(self) -> float: ...
+    def step(
+        self,
+        x: _ArrayLike,
+        u: _ArrayLike,
+        fc: _ArrayLike = (0.0, 0.0),
+        gamma: float = 0.0,
+        point: _ArrayLike = (0.0, 0.0),
+    ) -> _F64:
+        """The next state (6,). ``fc = [F_n, F_t]`` is the force on the target (the bullet
+        receives ``-fc``), ``gamma`` the world heading of the contact normal, ``point`` the
+        point of action in the bullet's body frame relative to its c.g."""
+    def step_jac(
+        self,
+        x: _ArrayLike,
+        u: _ArrayLike,
+        fc: _ArrayLike = (0.0, 0.0),
+        gamma: float = 0.0,
+        point: _ArrayLike = (0.0, 0.0),
+    ) -> Tuple[_F64, _F64, _F64, _F64]:
+        """``(x_next (6,), A = dx+/dx (6, 6), B = dx+/du (6, 2), F = dx+/dfc (6, 2))``."""
+
+class FourDofTarget:
+    """The 4-DOF analytic target model: state ``[vx, vy, yaw, r, p, phi, X, Y]``, input
+    ``[delta, T_b]``, one step of ``dt`` per call."""
+
+    def __init__(
+        self, params: str = "full_size", mu: float = 0.9, dt: float = 0.05, vehicle: str = "target"
+    ) -> None: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def param_count(self) -> int: ...
+    def step(
+        self,
+        x: _ArrayLike,
+        u: _ArrayLike,
+        fc: _ArrayLike = (0.0, 0.0),
+        gamma: float = 0.0,
+        point: _ArrayLike = (0.0, 0.0),
+    ) -> _F64:
+        """The next state (8,). ``fc = [F_n, F_t]`` acts on the target at ``point`` (body
+        frame, relative to the c.g.); ``gamma`` is the world heading of the normal."""
+    def step_jac(
+        self,
+        x: _ArrayLike,
+        u: _ArrayLike,
+        fc: _ArrayLike = (0.0, 0.0),
+        gamma: float = 0.0,
+        point: _ArrayLike = (0.0, 0.0),
+    ) -> Tuple[_F64, _F64, _F64, _F64]:
+        """``(x_next (8,), A (8, 8), B (8, 2), F (8, 2))``."""
