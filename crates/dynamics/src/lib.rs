@@ -27,6 +27,7 @@
 pub mod bullet;
 pub mod contact;
 pub mod error;
+pub mod fastmath;
 pub mod geometry;
 pub mod params;
 pub mod plant;

@@ -282,7 +282,9 @@ impl TyreParams {
     #[inline]
     #[must_use]
     pub fn cornering_stiffness(&self, fz: f64) -> f64 {
-        self.pky1 * self.fz0 * (2.0 * (fz / (self.pky2 * self.fz0)).atan()).sin()
+        // sin(2 atan x) = 2x / (1 + x²)
+        let x = fz / (self.pky2 * self.fz0);
+        self.pky1 * self.fz0 * 2.0 * x / (1.0 + x * x)
     }
 }
 

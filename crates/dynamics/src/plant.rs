@@ -28,6 +28,7 @@
 
 use crate::contact::{obb_contact, ContactGeometry, ContactLaw};
 use crate::error::ParamError;
+use crate::fastmath;
 use crate::geometry::{cross, rotate, Obb, Pose2, Vec2};
 use crate::params::{ParamSet, TyreParams, VehicleParams};
 use crate::road::Obstacle;
@@ -146,9 +147,10 @@ struct Chassis {
     brake_share: [f64; 4],
     steer_max: f64,
     steer_rate_max: f64,
-    steer_tau: f64,
+    /// Exact first-order-lag factors `1 − exp(−dt/τ)` for steer and torques.
+    steer_lag: f64,
     torque_limits: (f64, f64),
-    torque_tau: f64,
+    torque_lag: f64,
     brake_max: f64,
     rolling_resistance: f64,
     drag: f64,
@@ -182,7 +184,7 @@ impl Chassis {
         Vec2::new(self.h_bumper * b.q, self.h_bumper_roll * b.p)
     }
 
-    fn new(p: &VehicleParams, mu: f64) -> Self {
+    fn new(p: &VehicleParams, mu: f64, dt: f64) -> Self {
         let l = p.wheelbase();
         let (fz_f, fz_r) = p.static_axle_loads();
         let mus = p.mass - p.sprung_mass;
@@ -229,9 +231,9 @@ impl Chassis {
             brake_share: [0.5 * bf, 0.5 * bf, 0.5 * (1.0 - bf), 0.5 * (1.0 - bf)],
             steer_max: p.steer_max,
             steer_rate_max: p.steer_rate_max,
-            steer_tau: p.steer_time_constant,
+            steer_lag: lag_factor(dt, p.steer_time_constant),
             torque_limits: (p.drive_torque_min, p.drive_torque_max),
-            torque_tau: p.torque_time_constant,
+            torque_lag: lag_factor(dt, p.torque_time_constant),
             brake_max: p.brake_torque_max,
             rolling_resistance: p.rolling_resistance,
             drag: 0.5 * AIR_DENSITY * p.drag_area,
@@ -355,7 +357,10 @@ impl Plant {
         let law = ContactLaw::from_params(&params.contact);
         Ok(Self {
             config,
-            chassis: [Chassis::new(&params.bullet, config.mu), Chassis::new(&params.target, config.mu)],
+            chassis: [
+                Chassis::new(&params.bullet, config.mu, config.dt),
+                Chassis::new(&params.target, config.mu, config.dt),
+            ],
             bodies: [VehicleBody::default(); 2],
             law,
             obstacle_law: law.stiffer(params.contact.obstacle_stiffness_factor),
@@ -679,20 +684,19 @@ fn may_overlap(a: &Obb, b: &Obb) -> bool {
     (a.center - b.center).norm_squared() < r * r
 }
 
-/// First-order lag towards `target` over `dt` with time constant `tau` (exact).
-#[inline]
-fn lag(value: f64, target: f64, dt: f64, tau: f64) -> f64 {
+/// Exact discretisation factor of a first-order lag: `1 − exp(−dt/τ)` (1 for τ = 0).
+fn lag_factor(dt: f64, tau: f64) -> f64 {
     if tau <= 0.0 {
-        target
+        1.0
     } else {
-        value + (target - value) * (1.0 - (-dt / tau).exp())
+        1.0 - (-dt / tau).exp()
     }
 }
 
 /// One semi-implicit Euler step of one vehicle.
 #[allow(clippy::too_many_lines)]
 fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, tyres: bool) {
-    let (s, co) = b.yaw.sin_cos();
+    let (s, co) = fastmath::sin_cos(b.yaw);
     let to_body = |v: Vec2| Vec2::new(co * v.x + s * v.y, -s * v.x + co * v.y);
     let to_world = |v: Vec2| Vec2::new(co * v.x - s * v.y, s * v.x + co * v.y);
     let e = c.cg_offset(b);
@@ -718,7 +722,7 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
     ];
 
     // Tyre forces.
-    let (sd, cd) = b.steer.sin_cos();
+    let (sd, cd) = fastmath::sin_cos(b.steer);
     let mut f_body = Vec2::zeros();
     let mut m_z = 0.0;
     let mut fx_wheel = [0.0; 4];
@@ -789,10 +793,29 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
     // Actuators.
     let steer_target = b.cmd_steer.clamp(-c.steer_max, c.steer_max);
     let step_max = c.steer_rate_max * dt;
-    b.steer += (lag(b.steer, steer_target, dt, c.steer_tau) - b.steer).clamp(-step_max, step_max);
-    b.torque = lag(b.torque, b.cmd_torque.clamp(c.torque_limits.0, c.torque_limits.1), dt, c.torque_tau);
-    b.brake = lag(b.brake, b.cmd_brake.clamp(0.0, c.brake_max), dt, c.torque_tau);
+    b.steer += ((steer_target - b.steer) * c.steer_lag).clamp(-step_max, step_max);
+    b.torque += (b.cmd_torque.clamp(c.torque_limits.0, c.torque_limits.1) - b.torque) * c.torque_lag;
+    b.brake += (b.cmd_brake.clamp(0.0, c.brake_max) - b.brake) * c.torque_lag;
 
     b.fz = fz;
     b.acc_body = acc_body;
+    flush_tiny(b);
+}
+
+/// Values that decay exponentially at rest (damped suspension, creeping velocity) would
+/// reach subnormal numbers after minutes of simulated time, where arithmetic is ~100× slower.
+/// Anything below 1e-150 is physically zero.
+#[inline]
+fn flush_tiny(b: &mut VehicleBody) {
+    const TINY: f64 = 1e-150;
+    let flush = |v: &mut f64| {
+        if v.abs() < TINY {
+            *v = 0.0;
+        }
+    };
+    flush(&mut b.vel.x);
+    flush(&mut b.vel.y);
+    for v in [&mut b.r, &mut b.phi, &mut b.p, &mut b.theta, &mut b.q] {
+        flush(v);
+    }
 }

@@ -9,6 +9,7 @@
 //! The road adhesion μ scales the peak: `λ_μ = μ / p_dy1`, so that at nominal load the
 //! lateral peak friction equals μ. Cornering and slip stiffness do not depend on μ.
 
+use crate::fastmath;
 use crate::params::TyreParams;
 
 /// Speed (m/s) below which slip denominators are regularised: `sqrt(v_x² + V_LOW²)` for the
@@ -21,7 +22,7 @@ pub const V_LOW: f64 = 0.5;
 #[inline]
 #[must_use]
 pub fn slip_angle(vx: f64, vy: f64) -> f64 {
-    (vy / (vx * vx + V_LOW * V_LOW).sqrt()).atan()
+    fastmath::atan(vy / (vx * vx + V_LOW * V_LOW).sqrt())
 }
 
 /// The Magic Formula `y = D sin(C atan(B x − E (B x − atan(B x))))`.
@@ -29,7 +30,7 @@ pub fn slip_angle(vx: f64, vy: f64) -> f64 {
 #[must_use]
 pub fn magic_formula(x: f64, b: f64, c: f64, d: f64, e: f64) -> f64 {
     let bx = b * x;
-    d * (c * (bx - e * (bx - bx.atan())).atan()).sin()
+    d * fastmath::sin(c * fastmath::atan(bx - e * (bx - fastmath::atan(bx))))
 }
 
 /// The Magic Formula and its derivative with respect to `x`.
@@ -37,11 +38,11 @@ pub fn magic_formula(x: f64, b: f64, c: f64, d: f64, e: f64) -> f64 {
 #[must_use]
 pub fn magic_formula_d(x: f64, b: f64, c: f64, d: f64, e: f64) -> (f64, f64) {
     let bx = b * x;
-    let inner = bx - e * (bx - bx.atan());
+    let inner = bx - e * (bx - fastmath::atan(bx));
     // d inner / dx = B (1 − E + E / (1 + (Bx)²))
     let dinner = b * (1.0 - e + e / (1.0 + bx * bx));
-    let phi = c * inner.atan();
-    let (s, co) = phi.sin_cos();
+    let phi = c * fastmath::atan(inner);
+    let (s, co) = fastmath::sin_cos(phi);
     (d * s, d * co * c * dinner / (1.0 + inner * inner))
 }
 
@@ -130,9 +131,9 @@ pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: 
     let fy0 = -magic_formula(alpha, by, t.pcy1, dy, t.pey1);
     // Combined-slip weighting.
     let bxa = t.rbx1 / (1.0 + (t.rbx2 * kappa).powi(2)).sqrt();
-    let gxa = (t.rcx1 * (bxa * alpha).abs().atan()).min(std::f64::consts::FRAC_PI_2).cos();
+    let gxa = fastmath::cos((t.rcx1 * fastmath::atan((bxa * alpha).abs())).min(std::f64::consts::FRAC_PI_2));
     let byk = t.rby1 / (1.0 + (t.rby2 * alpha).powi(2)).sqrt();
-    let gyk = (t.rcy1 * (byk * kappa).abs().atan()).min(std::f64::consts::FRAC_PI_2).cos();
+    let gyk = fastmath::cos((t.rcy1 * fastmath::atan((byk * kappa).abs())).min(std::f64::consts::FRAC_PI_2));
     TyreForces { fx: fx0 * gxa, fy: fy0 * gyk, kx }
 }
 
