@@ -25,6 +25,7 @@
 //! * [`plant`]: the high-fidelity two-vehicle plant (the truth).
 
 pub mod bullet;
+pub mod compare;
 pub mod contact;
 pub mod error;
 pub mod fastmath;

@@ -436,6 +436,12 @@ impl Plant {
         b.cmd_brake = finite_or_zero(t_b);
     }
 
+    /// Drive-torque command T_r of either vehicle (N m, motor side; the target's driver is
+    /// normally off the throttle, but tests and scripted drivers may hold its speed).
+    pub fn set_drive(&mut self, which: Which, t_r: f64) {
+        self.bodies[which as usize].cmd_torque = finite_or_zero(t_r);
+    }
+
     /// Service-brake command of either vehicle (N m total at the wheels).
     pub fn set_brake(&mut self, which: Which, t_b: f64) {
         self.bodies[which as usize].cmd_brake = finite_or_zero(t_b);
