@@ -15,16 +15,14 @@ const SQRT3: f64 = 1.732_050_807_568_877_2;
 #[inline]
 #[must_use]
 pub fn atan(x: f64) -> f64 {
-    let sign = x.signum();
-    let mut t = x.abs();
-    let mut offset = 0.0;
-    let invert = t > 1.0;
-    if invert {
-        t = 1.0 / t;
-    }
-    if t > TAN_PI_12 {
+    // NaN propagates through the arithmetic below; ±∞ maps to ±π/2 via 1/∞ = 0.
+    let a = x.abs();
+    let invert = a > 1.0;
+    let mut t = if invert { 1.0 / a } else { a };
+    let reduce = t > TAN_PI_12;
+    let offset = if reduce { FRAC_PI_6 } else { 0.0 };
+    if reduce {
         t = (t * SQRT3 - 1.0) / (t + SQRT3);
-        offset = FRAC_PI_6;
     }
     // Taylor series to t¹⁹ on |t| ≤ tan(π/12): remainder < 0.268²¹/21 ≈ 5e-14.
     let t2 = t * t;
@@ -35,14 +33,9 @@ pub fn atan(x: f64) -> f64 {
                     + t2 * (1.0 / 9.0
                         + t2 * (-1.0 / 11.0
                             + t2 * (1.0 / 13.0 + t2 * (-1.0 / 15.0 + t2 * (1.0 / 17.0 + t2 * (-1.0 / 19.0)))))))));
-    let mut r = offset + t * poly;
-    if invert {
-        r = FRAC_PI_2 - r;
-    }
-    if x.is_nan() {
-        return x;
-    }
-    sign * r
+    let r = offset + t * poly;
+    let r = if invert { FRAC_PI_2 - r } else { r };
+    r.copysign(x)
 }
 
 /// Sine and cosine for |x| ≤ 2π (the Magic Formula's `C·atan(·)` stays within ±C·π/2);
@@ -54,9 +47,12 @@ pub fn sin_cos(x: f64) -> (f64, f64) {
         return x.sin_cos();
     }
     // Reduce to |y| ≤ π/4 by quadrant.
-    let k = (x * std::f64::consts::FRAC_2_PI).round();
+    // Nearest quadrant; `as i64` truncates natively (f64::round is a soft-float call on
+    // baseline x86-64).
+    let q = (x * std::f64::consts::FRAC_2_PI + 0.5f64.copysign(x)) as i64;
+    let k = q as f64;
     // Two-part π/2 for the reduction (Cody–Waite).
-    const PIO2_HI: f64 = 1.570_796_326_794_896_6;
+    const PIO2_HI: f64 = std::f64::consts::FRAC_PI_2;
     const PIO2_LO: f64 = 6.123_233_995_736_766e-17;
     let y = (x - k * PIO2_HI) - k * PIO2_LO;
     let y2 = y * y;
@@ -69,7 +65,7 @@ pub fn sin_cos(x: f64) -> (f64, f64) {
             + y2 * (1.0 / 24.0
                 + y2 * (-1.0 / 720.0
                     + y2 * (1.0 / 40_320.0 + y2 * (-1.0 / 3_628_800.0 + y2 * (1.0 / 479_001_600.0 + y2 * (-1.0 / 87_178_291_200.0)))))));
-    match (k as i64).rem_euclid(4) {
+    match q.rem_euclid(4) {
         0 => (s, c),
         1 => (c, -s),
         2 => (-s, -c),

@@ -38,6 +38,7 @@ pub mod target4dof;
 pub mod tyre;
 
 pub use error::ParamError;
+pub use road::RoadError;
 pub use target::{ContactInput, TargetJacobians, TargetModel, TargetInput, TargetState};
 
 /// Standard gravity (m/s²).

@@ -605,8 +605,8 @@ impl Plant {
             }
         }
         let tyres = self.config.tyre_forces;
-        for i in 0..2 {
-            integrate_vehicle(&self.chassis[i], &mut self.bodies[i], &ext[i], dt, tyres);
+        for ((chassis, body), ext) in self.chassis.iter().zip(self.bodies.iter_mut()).zip(&ext) {
+            integrate_vehicle(chassis, body, ext, dt, tyres);
         }
         self.steps += 1;
         self.time = self.steps as f64 * dt;
@@ -715,11 +715,10 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
     // (with the last step's c.g. acceleration).
     let m_pitch = c.k_pitch * b.theta + c.c_pitch * b.q;
     let d_front = (m_pitch - c.long_transfer * b.acc_body.x) / c.wheelbase;
-    let mut d_left = [0.0; 2];
-    for axle in 0..2 {
+    let d_left: [f64; 2] = std::array::from_fn(|axle| {
         let m_roll = c.k_roll[axle] * b.phi + c.c_roll[axle] * b.p;
-        d_left[axle] = m_roll / c.track[axle] - c.lat_transfer[axle] * b.acc_body.y;
-    }
+        m_roll / c.track[axle] - c.lat_transfer[axle] * b.acc_body.y
+    });
     let fz = [
         (c.fz_static[0] + 0.5 * d_front + d_left[0]).max(0.0),
         (c.fz_static[1] + 0.5 * d_front - d_left[0]).max(0.0),
