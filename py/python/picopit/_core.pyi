@@ -45,7 +45,12 @@ class ContactDict(TypedDict):
 class Plant:
     """The high-fidelity two-vehicle simulator (the truth), fixed step ``dt``."""
 
-    def __init__(self, params: str = "full_size", mu: float = 0.9, dt: float = 1e-3) -> None: ...
+    def __init__(
+        self, params: str = "full_size", mu: float = 0.9, dt: float = 1e-3, *, tyre_forces: bool = True
+    ) -> None:
+        """``params``: built-in set name or TOML path; ``mu``: road adhesion in (0, 1.5];
+        ``dt``: step in (0, 1e-3] s; ``tyre_forces=False`` leaves only contact forces
+        (diagnostics). Bad values raise ParamError naming ``plant.mu`` / ``plant.dt``."""
     def reset(self, bullet: _ArrayLike, target: _ArrayLike) -> None:
         """Place both vehicles, each ``[X, Y, yaw, vx, vy, r]`` (c.g. position, body-frame
         velocities); time restarts at 0."""
@@ -55,15 +60,23 @@ class Plant:
         bullet_torque: float,
         target_steer: float = 0.0,
         target_brake: float = 0.0,
+        bullet_brake: float = 0.0,
     ) -> None:
         """Driver commands held until changed: bullet front steer (rad), rear drive torque
-        T_r (N m); target front steer (rad), brake torque (N m, >= 0)."""
+        T_r (N m, negative brakes through the drivetrain); target front steer (rad), brake
+        torque (N m, >= 0); bullet service brake (N m, >= 0). The plant applies actuator
+        limits, rate limits and lags."""
     def advance(self, duration: float) -> None:
-        """Simulate ``duration`` seconds; the GIL is released meanwhile."""
+        """Simulate ``duration`` seconds (rounded to whole steps, at most 1e5 s); the GIL is
+        released meanwhile."""
     def step(self) -> None:
         """One integration step of ``dt``."""
     @property
     def time(self) -> float: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def mu(self) -> float: ...
     @property
     def params(self) -> str: ...
     def bullet_state(self) -> _F64:
@@ -71,7 +84,11 @@ class Plant:
     def target_state(self) -> _F64:
         """``[vx, vy, yaw, r, p, phi, X, Y]`` (the paper's order), shape (8,)."""
     def contact(self) -> Optional[ContactDict]:
-        """The current bullet-target contact, or None."""
+        """The bullet-target contact of the last step, or None."""
+    def take_contact_average(self) -> Optional[ContactDict]:
+        """The contact averaged since the previous call (impulse over elapsed time; normal and
+        points weighted by the normal impulse; ``depth`` the maximum), then averaging
+        restarts. None if the vehicles did not touch in that interval."""
     def footprints(self) -> _F64:
         """Corners, shape (2, 4, 2): [bullet, target] x 4 corners x [X, Y]."""
 
@@ -80,28 +97,41 @@ class BulletModel:
     ``[delta_f, T_r]``, one RK4 step of ``dt`` per call."""
 
     def __init__(
-        self, params: str = "full_size", mu: float = 0.9, dt: float = 0.05, vehicle: str = "bullet"
-    ) -> None: ...
+        self,
+        params: str = "full_size",
+        mu: float = 0.9,
+        dt: float = 0.05,
+        vehicle: str = "bullet",
+        *,
+        substeps: int = 1,
+    ) -> None:
+        """``vehicle`` picks ``bullet`` or ``target`` out of the parameter set; ``substeps``
+        splits each step into equal RK4 sub-steps (Jacobians stay exact)."""
     @property
     def dt(self) -> float: ...
+    @property
+    def substeps(self) -> int: ...
+    @property
+    def understeer_gradient(self) -> float:
+        """Understeer gradient from the axle curves (rad s^2/m)."""
     def step(
         self,
         x: _ArrayLike,
         u: _ArrayLike,
-        fc: _ArrayLike = (0.0, 0.0),
+        fc: Optional[_ArrayLike] = None,
         gamma: float = 0.0,
-        point: _ArrayLike = (0.0, 0.0),
+        point: Optional[_ArrayLike] = None,
     ) -> _F64:
         """The next state (6,). ``fc = [F_n, F_t]`` is the force on the target (the bullet
         receives ``-fc``), ``gamma`` the world heading of the contact normal, ``point`` the
-        point of action in the bullet's body frame relative to its c.g."""
+        point of action in the bullet's body frame relative to its c.g.; None means zero."""
     def step_jac(
         self,
         x: _ArrayLike,
         u: _ArrayLike,
-        fc: _ArrayLike = (0.0, 0.0),
+        fc: Optional[_ArrayLike] = None,
         gamma: float = 0.0,
-        point: _ArrayLike = (0.0, 0.0),
+        point: Optional[_ArrayLike] = None,
     ) -> Tuple[_F64, _F64, _F64, _F64]:
         """``(x_next (6,), A = dx+/dx (6, 6), B = dx+/du (6, 2), F = dx+/dfc (6, 2))``."""
 
@@ -110,19 +140,31 @@ class FourDofTarget:
     ``[delta, T_b]``, one step of ``dt`` per call."""
 
     def __init__(
-        self, params: str = "full_size", mu: float = 0.9, dt: float = 0.05, vehicle: str = "target"
+        self,
+        params: str = "full_size",
+        mu: float = 0.9,
+        dt: float = 0.05,
+        vehicle: str = "target",
+        *,
+        substeps: int = 1,
     ) -> None: ...
     @property
     def dt(self) -> float: ...
     @property
-    def param_count(self) -> int: ...
+    def substeps(self) -> int: ...
+    @property
+    def param_count(self) -> int:
+        """Trainable parameters (0: analytic)."""
+    @property
+    def name(self) -> str:
+        """``4dof``."""
     def step(
         self,
         x: _ArrayLike,
         u: _ArrayLike,
-        fc: _ArrayLike = (0.0, 0.0),
+        fc: Optional[_ArrayLike] = None,
         gamma: float = 0.0,
-        point: _ArrayLike = (0.0, 0.0),
+        point: Optional[_ArrayLike] = None,
     ) -> _F64:
         """The next state (8,). ``fc = [F_n, F_t]`` acts on the target at ``point`` (body
         frame, relative to the c.g.); ``gamma`` is the world heading of the normal."""
@@ -130,8 +172,8 @@ class FourDofTarget:
         self,
         x: _ArrayLike,
         u: _ArrayLike,
-        fc: _ArrayLike = (0.0, 0.0),
+        fc: Optional[_ArrayLike] = None,
         gamma: float = 0.0,
-        point: _ArrayLike = (0.0, 0.0),
+        point: Optional[_ArrayLike] = None,
     ) -> Tuple[_F64, _F64, _F64, _F64]:
         """``(x_next (8,), A (8, 8), B (8, 2), F (8, 2))``."""
