@@ -31,10 +31,15 @@ pub(crate) fn param_err(e: &dynamics::ParamError) -> PyErr {
 }
 
 /// Copy a 1-D float array-like of length `N` into an owned vector, naming `name` in errors.
-pub(crate) fn vec_arg<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<SVector<f64, N>> {
-    let arr = obj.extract::<PyArrayLikeDyn<'_, f64, AllowTypeChange>>().map_err(|e| {
-        PyValueError::new_err(format!("{name}: expected an array of {N} floats ({e})"))
-    })?;
+pub(crate) fn vec_arg<const N: usize>(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+) -> PyResult<SVector<f64, N>> {
+    let arr = obj
+        .extract::<PyArrayLikeDyn<'_, f64, AllowTypeChange>>()
+        .map_err(|e| {
+            PyValueError::new_err(format!("{name}: expected an array of {N} floats ({e})"))
+        })?;
     let view = arr.as_array();
     if view.shape() != [N] {
         return Err(PyValueError::new_err(format!(
@@ -46,7 +51,9 @@ pub(crate) fn vec_arg<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyR
     // ndarray iterates in logical order whatever the strides; the copy is element by element.
     for (i, v) in view.iter().enumerate() {
         if !v.is_finite() {
-            return Err(PyValueError::new_err(format!("{name}[{i}] = {v}: must be finite")));
+            return Err(PyValueError::new_err(format!(
+                "{name}[{i}] = {v}: must be finite"
+            )));
         }
         out[i] = *v;
     }
@@ -58,7 +65,9 @@ pub(crate) fn finite(value: f64, name: &str) -> PyResult<f64> {
     if value.is_finite() {
         Ok(value)
     } else {
-        Err(PyValueError::new_err(format!("{name} = {value}: must be finite")))
+        Err(PyValueError::new_err(format!(
+            "{name} = {value}: must be finite"
+        )))
     }
 }
 
@@ -67,12 +76,17 @@ pub(crate) fn positive(value: f64, name: &str) -> PyResult<f64> {
     if value.is_finite() && value > 0.0 {
         Ok(value)
     } else {
-        Err(PyValueError::new_err(format!("{name} = {value}: must be finite and positive")))
+        Err(PyValueError::new_err(format!(
+            "{name} = {value}: must be finite and positive"
+        )))
     }
 }
 
 /// A new 1-D numpy array with a copy of `v`.
-pub(crate) fn vec_out<'py, const N: usize>(py: Python<'py>, v: &SVector<f64, N>) -> Bound<'py, PyArray1<f64>> {
+pub(crate) fn vec_out<'py, const N: usize>(
+    py: Python<'py>,
+    v: &SVector<f64, N>,
+) -> Bound<'py, PyArray1<f64>> {
     PyArray1::from_slice(py, v.as_slice())
 }
 
@@ -81,7 +95,9 @@ pub(crate) fn mat_out<'py, const R: usize, const C: usize>(
     py: Python<'py>,
     m: &SMatrix<f64, R, C>,
 ) -> Bound<'py, PyArray2<f64>> {
-    let rows: Vec<Vec<f64>> = (0..R).map(|i| (0..C).map(|j| m[(i, j)]).collect()).collect();
+    let rows: Vec<Vec<f64>> = (0..R)
+        .map(|i| (0..C).map(|j| m[(i, j)]).collect())
+        .collect();
     PyArray2::from_vec2(py, &rows).expect("rows have equal length")
 }
 

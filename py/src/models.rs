@@ -29,20 +29,32 @@ fn vehicle_params(py: Python<'_>, params: &str, vehicle: &str) -> PyResult<Vehic
         )));
     }
     let name = params.to_owned();
-    let set = py.detach(move || ParamSet::load(&name)).map_err(|e| param_err(&e))?;
-    Ok(if vehicle == "bullet" { set.bullet } else { set.target })
+    let set = py
+        .detach(move || ParamSet::load(&name))
+        .map_err(|e| param_err(&e))?;
+    Ok(if vehicle == "bullet" {
+        set.bullet
+    } else {
+        set.target
+    })
 }
 
 /// Road adhesion, step length and sub-step count, checked.
 fn settings(mu: f64, dt: f64, substeps: usize) -> PyResult<(f64, f64, usize)> {
     if !(mu.is_finite() && mu > 0.0 && mu <= 1.5) {
-        return Err(PyValueError::new_err(format!("mu = {mu}: must lie in (0, 1.5]")));
+        return Err(PyValueError::new_err(format!(
+            "mu = {mu}: must lie in (0, 1.5]"
+        )));
     }
     if !(dt.is_finite() && dt > 0.0 && dt <= 1.0) {
-        return Err(PyValueError::new_err(format!("dt = {dt}: must lie in (0, 1] s")));
+        return Err(PyValueError::new_err(format!(
+            "dt = {dt}: must lie in (0, 1] s"
+        )));
     }
     if !(1..=1000).contains(&substeps) {
-        return Err(PyValueError::new_err(format!("substeps = {substeps}: must lie in [1, 1000]")));
+        return Err(PyValueError::new_err(format!(
+            "substeps = {substeps}: must lie in [1, 1000]"
+        )));
     }
     Ok((mu, dt, substeps))
 }
@@ -56,10 +68,20 @@ fn contact_arg(
     gamma: f64,
     point: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<ContactInput> {
-    let fc = fc.map(|a| vec_arg::<2>(a, "fc")).transpose()?.unwrap_or_else(SVector::zeros);
-    let p = point.map(|a| vec_arg::<2>(a, "point")).transpose()?.unwrap_or_else(SVector::zeros);
+    let fc = fc
+        .map(|a| vec_arg::<2>(a, "fc"))
+        .transpose()?
+        .unwrap_or_else(SVector::zeros);
+    let p = point
+        .map(|a| vec_arg::<2>(a, "point"))
+        .transpose()?
+        .unwrap_or_else(SVector::zeros);
     let gamma = finite(gamma, "gamma")?;
-    Ok(ContactInput { fc: Vec2::new(fc[0], fc[1]), gamma, point_in_body: Vec2::new(p[0], p[1]) })
+    Ok(ContactInput {
+        fc: Vec2::new(fc[0], fc[1]),
+        gamma,
+        point_in_body: Vec2::new(p[0], p[1]),
+    })
 }
 
 /// The bullet's front-steer / rear-drive single-track model: state `[X, Y, yaw, vx, vy, r]`,
@@ -73,10 +95,19 @@ pub struct BulletModel {
 impl BulletModel {
     #[new]
     #[pyo3(signature = (params = "full_size", mu = 0.9, dt = 0.05, vehicle = "bullet", *, substeps = 1))]
-    fn new(py: Python<'_>, params: &str, mu: f64, dt: f64, vehicle: &str, substeps: usize) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        params: &str,
+        mu: f64,
+        dt: f64,
+        vehicle: &str,
+        substeps: usize,
+    ) -> PyResult<Self> {
         let (mu, dt, substeps) = settings(mu, dt, substeps)?;
         let v = vehicle_params(py, params, vehicle)?;
-        Ok(Self { inner: CoreBullet::new(&v, mu, dt).with_substeps(substeps) })
+        Ok(Self {
+            inner: CoreBullet::new(&v, mu, dt).with_substeps(substeps),
+        })
     }
 
     /// Step length (s).
@@ -137,7 +168,12 @@ impl BulletModel {
             let next = inner.step_jac(&x, &u, &c, &mut jac);
             (next, jac)
         });
-        Ok((vec_out(py, &next), mat_out(py, &jac.a), mat_out(py, &jac.b), mat_out(py, &jac.f)))
+        Ok((
+            vec_out(py, &next),
+            mat_out(py, &jac.a),
+            mat_out(py, &jac.b),
+            mat_out(py, &jac.f),
+        ))
     }
 }
 
@@ -152,10 +188,19 @@ pub struct FourDofTarget {
 impl FourDofTarget {
     #[new]
     #[pyo3(signature = (params = "full_size", mu = 0.9, dt = 0.05, vehicle = "target", *, substeps = 1))]
-    fn new(py: Python<'_>, params: &str, mu: f64, dt: f64, vehicle: &str, substeps: usize) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        params: &str,
+        mu: f64,
+        dt: f64,
+        vehicle: &str,
+        substeps: usize,
+    ) -> PyResult<Self> {
         let (mu, dt, substeps) = settings(mu, dt, substeps)?;
         let v = vehicle_params(py, params, vehicle)?;
-        Ok(Self { inner: CoreFourDof::new(&v, mu, dt).with_substeps(substeps) })
+        Ok(Self {
+            inner: CoreFourDof::new(&v, mu, dt).with_substeps(substeps),
+        })
     }
 
     /// Step length (s).
@@ -222,7 +267,12 @@ impl FourDofTarget {
             let next = inner.step_jac(&x, &u, &c, &mut jac);
             (next, jac)
         });
-        Ok((vec_out(py, &next), mat_out(py, &jac.a), mat_out(py, &jac.b), mat_out(py, &jac.f)))
+        Ok((
+            vec_out(py, &next),
+            mat_out(py, &jac.a),
+            mat_out(py, &jac.b),
+            mat_out(py, &jac.f),
+        ))
     }
 }
 

@@ -19,7 +19,14 @@ pub struct Plant {
 }
 
 fn vehicle_init(x: &nalgebra::SVector<f64, 6>) -> VehicleInit {
-    VehicleInit { x: x[0], y: x[1], yaw: x[2], vx: x[3], vy: x[4], r: x[5] }
+    VehicleInit {
+        x: x[0],
+        y: x[1],
+        yaw: x[2],
+        vx: x[3],
+        vy: x[4],
+        r: x[5],
+    }
 }
 
 #[pymethods]
@@ -33,10 +40,20 @@ impl Plant {
         let inner = py
             .detach(move || {
                 let set = ParamSet::load(&name)?;
-                CorePlant::new(&set, PlantConfig { dt, mu, tyre_forces })
+                CorePlant::new(
+                    &set,
+                    PlantConfig {
+                        dt,
+                        mu,
+                        tyre_forces,
+                    },
+                )
             })
             .map_err(|e| param_err(&e))?;
-        Ok(Self { inner, params: params.to_owned() })
+        Ok(Self {
+            inner,
+            params: params.to_owned(),
+        })
     }
 
     /// Place both vehicles: `[X, Y, yaw, vx, vy, r]` each (c.g. position, body-frame
@@ -127,14 +144,23 @@ impl Plant {
     /// The current bullet-target contact, or None: `fc` = [F_n, F_t] on the target in the
     /// contact frame, `gamma`, contact points (world, target body, bullet body), `depth`.
     fn contact<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        self.inner.contact().map(|c| contact_dict(py, &c)).transpose()
+        self.inner
+            .contact()
+            .map(|c| contact_dict(py, &c))
+            .transpose()
     }
 
     /// The contact averaged since the previous call (impulse over elapsed time; normal and
     /// points weighted by the normal impulse; `depth` the maximum), then averaging restarts.
     /// None if the vehicles did not touch in that interval. This is what a logger records.
-    fn take_contact_average<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        self.inner.take_contact_average().map(|c| contact_dict(py, &c)).transpose()
+    fn take_contact_average<'py>(
+        &mut self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, PyDict>>> {
+        self.inner
+            .take_contact_average()
+            .map(|c| contact_dict(py, &c))
+            .transpose()
     }
 
     /// Footprint corners, shape (2, 4, 2): [bullet, target] x 4 corners (counter-clockwise
@@ -144,7 +170,11 @@ impl Plant {
     }
 
     fn __repr__(&self) -> String {
-        format!("Plant(params={:?}, time={:.3})", self.params, self.inner.time())
+        format!(
+            "Plant(params={:?}, time={:.3})",
+            self.params,
+            self.inner.time()
+        )
     }
 }
 
@@ -152,9 +182,18 @@ fn contact_dict<'py>(py: Python<'py>, c: &ContactReport) -> PyResult<Bound<'py, 
     let d = PyDict::new(py);
     d.set_item("fc", PyArray1::from_slice(py, c.fc.as_slice()))?;
     d.set_item("gamma", c.gamma)?;
-    d.set_item("point_in_world", PyArray1::from_slice(py, c.point_in_world.as_slice()))?;
-    d.set_item("point_in_target", PyArray1::from_slice(py, c.point_in_target.as_slice()))?;
-    d.set_item("point_in_bullet", PyArray1::from_slice(py, c.point_in_bullet.as_slice()))?;
+    d.set_item(
+        "point_in_world",
+        PyArray1::from_slice(py, c.point_in_world.as_slice()),
+    )?;
+    d.set_item(
+        "point_in_target",
+        PyArray1::from_slice(py, c.point_in_target.as_slice()),
+    )?;
+    d.set_item(
+        "point_in_bullet",
+        PyArray1::from_slice(py, c.point_in_bullet.as_slice()),
+    )?;
     d.set_item("depth", c.depth)?;
     Ok(d)
 }
@@ -163,7 +202,9 @@ fn non_negative(value: f64, name: &str) -> PyResult<f64> {
     if value.is_finite() && value >= 0.0 {
         Ok(value)
     } else {
-        Err(PyValueError::new_err(format!("{name} = {value}: must be finite and not negative")))
+        Err(PyValueError::new_err(format!(
+            "{name} = {value}: must be finite and not negative"
+        )))
     }
 }
 
