@@ -1,1 +1,635 @@
-//! placeholder
+//! The bullet's control model: a front-steer, rear-drive single-track ("bicycle") model
+//! with Magic Formula axle curves and the contact force, integrated with classic RK4 over
+//! the MPC step, with the *exact* Jacobians of that discrete step.
+//!
+//! State `x_B = [X, Y, ψ, vx, vy, r]`, input `u_B = [δ_f, T_r]`, contact `f_c = [F_n, F_t]`
+//! (the bullet receives `−f_c`):
+//!
+//! ```text
+//! Ẋ = vx cosψ − vy sinψ        Ẏ = vx sinψ + vy cosψ        ψ̇ = r
+//! m (v̇x − r vy) = F_x,r − F_y,f sinδ + F_cx
+//! m (v̇y + r vx) = F_y,f cosδ + F_y,r + F_cy
+//! I_z ṙ          = l_f F_y,f cosδ − l_r F_y,r + M_c
+//! ```
+//!
+//! with `F_x,r = η_d i_g T_r / R_w`, `F_y,f = C_f(α_f)`, `α_f` the slip angle of the front
+//! wheel velocity `R(−δ)·(vx, vy + l_f r)`, `F_y,r = C_r(α_r)`, `α_r = α(vx, vy − l_r r)`
+//! ([`tyre::slip_angle`](crate::tyre::slip_angle), [`AxleCurve`] at the static axle loads),
+//! and `(F_cx, F_cy, M_c) = −R(γ − ψ) f_c` with its moment, as
+//! [`ContactInput::body_force`]`(ψ, −1)`.
+//!
+//! This module also holds the pieces shared with the 4-DOF target model
+//! ([`crate::target4dof`]): slip angles with their partial derivatives, the axle lateral
+//! forces with theirs, the contact force with its derivatives in ψ and `f_c`, and RK4 with
+//! exact Jacobian propagation through the four stages.
+
+use crate::geometry::{cross, Vec2};
+use crate::params::{TyreParams, VehicleParams};
+use crate::target::ContactInput;
+use crate::tyre::{slip_angle, AxleCurve, V_LOW};
+use nalgebra::{Matrix2, RowVector2, SMatrix, SVector};
+use std::ops::Range;
+
+/// Bullet state `[X, Y, ψ, vx, vy, r]`.
+pub type BulletState = SVector<f64, 6>;
+/// Bullet input `[δ_f, T_r]`: front steer (rad) and drive torque before the gear (N m,
+/// negative brakes through the drivetrain).
+pub type BulletInput = SVector<f64, 2>;
+
+/// Indices into [`BulletState`].
+pub mod idx {
+    pub const X: usize = 0;
+    pub const Y: usize = 1;
+    pub const PSI: usize = 2;
+    pub const VX: usize = 3;
+    pub const VY: usize = 4;
+    pub const R: usize = 5;
+}
+
+/// Number of bullet states.
+const NX: usize = 6;
+/// Columns of the stacked continuous Jacobian `[∂f/∂x | ∂f/∂u | ∂f/∂f_c]`.
+const NJ: usize = NX + 4;
+
+/// Jacobians of one discrete bullet step `x⁺ = F(x, u, f_c)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BulletJacobians {
+    /// ∂x⁺/∂x (6 × 6).
+    pub a: SMatrix<f64, 6, 6>,
+    /// ∂x⁺/∂u (6 × 2).
+    pub b: SMatrix<f64, 6, 2>,
+    /// ∂x⁺/∂f_c (6 × 2), with γ and the point of action held fixed. `f_c` is the force on
+    /// the target; the bullet receives `−f_c`, and that sign is inside this matrix.
+    pub f: SMatrix<f64, 6, 2>,
+}
+
+impl Default for BulletJacobians {
+    fn default() -> Self {
+        Self { a: SMatrix::zeros(), b: SMatrix::zeros(), f: SMatrix::zeros() }
+    }
+}
+
+/// The bullet's single-track control model (see the module docs for the equations).
+#[derive(Debug, Clone)]
+pub struct BulletModel {
+    mass: f64,
+    inv_mass: f64,
+    inv_iz: f64,
+    lf: f64,
+    lr: f64,
+    /// η_d i_g / R_w (1/m).
+    drive_gain: f64,
+    tyre: TyreParams,
+    fz_front: f64,
+    fz_rear: f64,
+    front: AxleCurve,
+    rear: AxleCurve,
+    dt: f64,
+    substeps: usize,
+}
+
+impl BulletModel {
+    /// The model of vehicle `p` on a road of adhesion `mu`, stepping over `dt` seconds.
+    /// The axle curves are the Magic Formula at the static axle loads.
+    #[must_use]
+    pub fn new(p: &VehicleParams, mu: f64, dt: f64) -> Self {
+        let (fz_front, fz_rear) = p.static_axle_loads();
+        Self {
+            mass: p.mass,
+            inv_mass: 1.0 / p.mass,
+            inv_iz: 1.0 / p.iz,
+            lf: p.lf,
+            lr: p.lr,
+            drive_gain: p.drive_force_gain(),
+            tyre: p.tyre.clone(),
+            fz_front,
+            fz_rear,
+            front: AxleCurve::new(&p.tyre, fz_front, mu),
+            rear: AxleCurve::new(&p.tyre, fz_rear, mu),
+            dt,
+            substeps: 1,
+        }
+    }
+
+    /// Split every step into `n` equal RK4 sub-steps (default 1; 0 is treated as 1). The
+    /// Jacobians stay exact (they are chained through the sub-steps).
+    ///
+    /// Explicit RK4 is stable only while the sub-step times the tyre eigenvalue
+    /// `≈ (C_f + C_r)/(m v_x)` stays inside its stability region; at 0.05 s a single step
+    /// is stable above about 3.4 m/s, 4 sub-steps above about 0.8 m/s (`docs/models.md`).
+    #[must_use]
+    pub fn with_substeps(mut self, n: usize) -> Self {
+        self.substeps = n.max(1);
+        self
+    }
+
+    /// Change the road adhesion: rebuilds both axle curves.
+    pub fn set_mu(&mut self, mu: f64) {
+        self.front = AxleCurve::new(&self.tyre, self.fz_front, mu);
+        self.rear = AxleCurve::new(&self.tyre, self.fz_rear, mu);
+    }
+
+    /// The step length (s).
+    #[must_use]
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// Number of RK4 sub-steps per step.
+    #[must_use]
+    pub fn substeps(&self) -> usize {
+        self.substeps
+    }
+
+    /// Front and rear axle lateral force curves.
+    #[must_use]
+    pub fn axle_curves(&self) -> (AxleCurve, AxleCurve) {
+        (self.front, self.rear)
+    }
+
+    /// Understeer gradient `K_us = (m/L)(l_r/C_f − l_f/C_r)` (rad per m/s²), with `C_f`,
+    /// `C_r` the axle cornering stiffnesses. In a steady turn of radius R at lateral
+    /// acceleration a_y, `δ = L/R + K_us a_y` (linear range).
+    #[must_use]
+    pub fn understeer_gradient(&self) -> f64 {
+        let l = self.lf + self.lr;
+        let cf = self.front.cornering_stiffness();
+        let cr = self.rear.cornering_stiffness();
+        self.mass / l * (self.lr / cf - self.lf / cr)
+    }
+
+    /// The continuous-time dynamics `ẋ = f(x, u, f_c)`.
+    #[must_use]
+    pub fn derivative(&self, x: &BulletState, u: &BulletInput, c: &ContactInput) -> BulletState {
+        self.eval(x, &Held::new(u[0], c, -1.0), self.drive_gain * u[1])
+    }
+
+    /// `f(x)` with the inputs held in `held` and the rear drive force `fxr`.
+    #[inline]
+    fn eval(&self, x: &BulletState, held: &Held, fxr: f64) -> BulletState {
+        let (psi, vx, vy, r) = (x[idx::PSI], x[idx::VX], x[idx::VY], x[idx::R]);
+        let (sd, cd) = (held.sd, held.cd);
+        let (sp, cp) = psi.sin_cos();
+        let fyf = front_lateral(&self.front, self.lf, vx, vy, r, sd, cd);
+        let fyr = rear_lateral(&self.rear, self.lr, vx, vy, r);
+        let (fc, mc) = held.contact.force(sp, cp);
+        BulletState::new(
+            vx * cp - vy * sp,
+            vx * sp + vy * cp,
+            r,
+            (fxr - fyf * sd + fc.x) * self.inv_mass + r * vy,
+            (fyf * cd + fyr + fc.y) * self.inv_mass - r * vx,
+            (self.lf * fyf * cd - self.lr * fyr + mc) * self.inv_iz,
+        )
+    }
+
+    /// `f(x)` and its stacked Jacobian `[∂f/∂x | ∂f/∂u | ∂f/∂f_c]` (6 × 10), written
+    /// entirely into `j`.
+    #[inline]
+    fn eval_jac(
+        &self,
+        x: &BulletState,
+        held: &Held,
+        fxr: f64,
+        j: &mut SMatrix<f64, NX, NJ>,
+    ) -> BulletState {
+        use idx::{PSI, R, VX, VY};
+        const DELTA: usize = NX;
+        const TR: usize = NX + 1;
+        const FN: usize = NX + 2;
+        const FT: usize = NX + 3;
+        let (psi, vx, vy, r) = (x[PSI], x[VX], x[VY], x[R]);
+        let (sd, cd) = (held.sd, held.cd);
+        let (lf, lr, inv_m, inv_iz) = (self.lf, self.lr, self.inv_mass, self.inv_iz);
+        let (sp, cp) = psi.sin_cos();
+        let ff = front_lateral_d(&self.front, lf, vx, vy, r, sd, cd);
+        let fr = rear_lateral_d(&self.rear, lr, vx, vy, r);
+        let ct = held.contact.terms(sp, cp);
+
+        *j = SMatrix::zeros();
+        // Kinematics.
+        j[(idx::X, PSI)] = -vx * sp - vy * cp;
+        j[(idx::X, VX)] = cp;
+        j[(idx::X, VY)] = -sp;
+        j[(idx::Y, PSI)] = vx * cp - vy * sp;
+        j[(idx::Y, VX)] = sp;
+        j[(idx::Y, VY)] = cp;
+        j[(PSI, R)] = 1.0;
+        // m v̇x = F_x,r − F_y,f sinδ + F_cx + m r vy.
+        j[(VX, PSI)] = ct.df_dpsi.x * inv_m;
+        j[(VX, VX)] = -ff.d_vx * sd * inv_m;
+        j[(VX, VY)] = -ff.d_vy * sd * inv_m + r;
+        j[(VX, R)] = -ff.d_r * sd * inv_m + vy;
+        j[(VX, DELTA)] = -(ff.d_delta * sd + ff.fy * cd) * inv_m;
+        j[(VX, TR)] = self.drive_gain * inv_m;
+        j[(VX, FN)] = ct.df_dfc[(0, 0)] * inv_m;
+        j[(VX, FT)] = ct.df_dfc[(0, 1)] * inv_m;
+        // m v̇y = F_y,f cosδ + F_y,r + F_cy − m r vx.
+        j[(VY, PSI)] = ct.df_dpsi.y * inv_m;
+        j[(VY, VX)] = (ff.d_vx * cd + fr.d_vx) * inv_m - r;
+        j[(VY, VY)] = (ff.d_vy * cd + fr.d_vy) * inv_m;
+        j[(VY, R)] = (ff.d_r * cd + fr.d_r) * inv_m - vx;
+        j[(VY, DELTA)] = (ff.d_delta * cd - ff.fy * sd) * inv_m;
+        j[(VY, FN)] = ct.df_dfc[(1, 0)] * inv_m;
+        j[(VY, FT)] = ct.df_dfc[(1, 1)] * inv_m;
+        // I_z ṙ = l_f F_y,f cosδ − l_r F_y,r + M_c.
+        j[(R, PSI)] = ct.dm_dpsi * inv_iz;
+        j[(R, VX)] = (lf * ff.d_vx * cd - lr * fr.d_vx) * inv_iz;
+        j[(R, VY)] = (lf * ff.d_vy * cd - lr * fr.d_vy) * inv_iz;
+        j[(R, R)] = (lf * ff.d_r * cd - lr * fr.d_r) * inv_iz;
+        j[(R, DELTA)] = lf * (ff.d_delta * cd - ff.fy * sd) * inv_iz;
+        j[(R, FN)] = ct.dm_dfc[0] * inv_iz;
+        j[(R, FT)] = ct.dm_dfc[1] * inv_iz;
+
+        BulletState::new(
+            vx * cp - vy * sp,
+            vx * sp + vy * cp,
+            r,
+            (fxr - ff.fy * sd + ct.f.x) * inv_m + r * vy,
+            (ff.fy * cd + fr.fy + ct.f.y) * inv_m - r * vx,
+            (lf * ff.fy * cd - lr * fr.fy + ct.m) * inv_iz,
+        )
+    }
+
+    /// One step of length `dt`: classic RK4 (in `substeps` sub-steps) with `u` and `c`
+    /// held.
+    #[must_use]
+    pub fn step(&self, x: &BulletState, u: &BulletInput, c: &ContactInput) -> BulletState {
+        let held = Held::new(u[0], c, -1.0);
+        let fxr = self.drive_gain * u[1];
+        rk4_substeps(x, self.dt, self.substeps, |xs| self.eval(xs, &held, fxr))
+    }
+
+    /// One step with the exact Jacobians of the discrete map written into `jac`; returns
+    /// the next state (bit for bit the state [`BulletModel::step`] returns).
+    pub fn step_jac(
+        &self,
+        x: &BulletState,
+        u: &BulletInput,
+        c: &ContactInput,
+        jac: &mut BulletJacobians,
+    ) -> BulletState {
+        let held = Held::new(u[0], c, -1.0);
+        let fxr = self.drive_gain * u[1];
+        let mut j = SMatrix::<f64, NX, NJ>::zeros();
+        // Only the columns ψ, vx, vy, r of ∂f/∂x can be nonzero.
+        let xn = rk4_jac_substeps(x, self.dt, self.substeps, idx::PSI..NX, &mut j, |xs, js| {
+            self.eval_jac(xs, &held, fxr, js)
+        });
+        split_columns(&j, &mut jac.a, &mut jac.b, &mut jac.f);
+        xn
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Shared pieces (also used by the 4-DOF target model).
+// ---------------------------------------------------------------------------------------
+
+/// What is held over one step: the steer angle's sine and cosine and the contact.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Held {
+    pub sd: f64,
+    pub cd: f64,
+    pub contact: HeldContact,
+}
+
+impl Held {
+    #[inline]
+    pub(crate) fn new(delta: f64, c: &ContactInput, sign: f64) -> Self {
+        let (sd, cd) = delta.sin_cos();
+        Self { sd, cd, contact: HeldContact::new(c, sign) }
+    }
+}
+
+/// A contact held over one step: `sign·f_c`, the sine and cosine of γ, the point of action.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct HeldContact {
+    /// `sign·f_c`.
+    fc: Vec2,
+    sign: f64,
+    sg: f64,
+    cg: f64,
+    point: Vec2,
+}
+
+/// The contact force in a body frame, its yaw moment, and their derivatives in ψ and `f_c`
+/// (γ and the point of action held fixed).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ContactTerms {
+    /// Force in the body frame.
+    pub f: Vec2,
+    /// Yaw moment about the c.g.
+    pub m: f64,
+    pub df_dpsi: Vec2,
+    pub dm_dpsi: f64,
+    /// ∂f/∂f_c = sign·R(γ − ψ).
+    pub df_dfc: Matrix2<f64>,
+    pub dm_dfc: RowVector2<f64>,
+}
+
+impl HeldContact {
+    /// The contact `c` as received with `sign` (+1 target, −1 bullet).
+    #[inline]
+    pub(crate) fn new(c: &ContactInput, sign: f64) -> Self {
+        let (sg, cg) = c.gamma.sin_cos();
+        Self { fc: c.fc * sign, sign, sg, cg, point: c.point_in_body }
+    }
+
+    /// `sin(γ − ψ)`, `cos(γ − ψ)` from the heading's sine and cosine.
+    #[inline]
+    fn rel(&self, sp: f64, cp: f64) -> (f64, f64) {
+        (self.sg * cp - self.cg * sp, self.cg * cp + self.sg * sp)
+    }
+
+    /// `sign·R(γ − ψ) f_c` and its yaw moment `p × f`, for a heading with sine `sp` and
+    /// cosine `cp` (the same as [`ContactInput::body_force`] up to rounding).
+    #[inline]
+    pub(crate) fn force(&self, sp: f64, cp: f64) -> (Vec2, f64) {
+        let (s, c) = self.rel(sp, cp);
+        let f = Vec2::new(c * self.fc.x - s * self.fc.y, s * self.fc.x + c * self.fc.y);
+        (f, cross(self.point, f))
+    }
+
+    /// [`HeldContact::force`] with its derivatives.
+    #[inline]
+    pub(crate) fn terms(&self, sp: f64, cp: f64) -> ContactTerms {
+        let (s, c) = self.rel(sp, cp);
+        let (f, m) = self.force(sp, cp);
+        let df_dfc = Matrix2::new(c, -s, s, c) * self.sign;
+        // d/dψ R(γ − ψ) = −R(γ − ψ + π/2): (f_x, f_y) ↦ (f_y, −f_x).
+        let df_dpsi = Vec2::new(f.y, -f.x);
+        let p = self.point;
+        ContactTerms {
+            f,
+            m,
+            df_dpsi,
+            dm_dpsi: cross(p, df_dpsi),
+            df_dfc,
+            dm_dfc: df_dfc.row(1) * p.x - df_dfc.row(0) * p.y,
+        }
+    }
+}
+
+/// Slip angle `α = atan(v_y / sqrt(v_x² + V_LOW²))` ([`slip_angle`]) and its partials
+/// `(∂α/∂v_x, ∂α/∂v_y)`.
+#[inline]
+#[must_use]
+pub(crate) fn slip_angle_d(vx: f64, vy: f64) -> (f64, f64, f64) {
+    let s2 = vx * vx + V_LOW * V_LOW;
+    let s = s2.sqrt();
+    // dα = (s dv_y − v_y ds) / (s² + v_y²),  ds = v_x dv_x / s.
+    let inv_den = 1.0 / (s2 + vy * vy);
+    (slip_angle(vx, vy), -vy * vx / s * inv_den, s * inv_den)
+}
+
+/// Front axle lateral force (wheel frame) and its partials.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct FrontLateral {
+    pub fy: f64,
+    pub d_vx: f64,
+    pub d_vy: f64,
+    pub d_r: f64,
+    pub d_delta: f64,
+}
+
+/// Rear axle lateral force and its partials.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RearLateral {
+    pub fy: f64,
+    pub d_vx: f64,
+    pub d_vy: f64,
+    pub d_r: f64,
+}
+
+/// Front-wheel velocity in the wheel frame, `R(−δ)·(v_x, v_y + l_f r)`.
+#[inline]
+fn front_wheel_velocity(lf: f64, vx: f64, vy: f64, r: f64, sd: f64, cd: f64) -> (f64, f64) {
+    let vyf = vy + lf * r;
+    (cd * vx + sd * vyf, -sd * vx + cd * vyf)
+}
+
+/// Front axle lateral force in the wheel frame, `F_y,f = C_f(α_f)`, for steer angle δ
+/// given by its sine `sd` and cosine `cd`.
+#[inline]
+#[must_use]
+pub(crate) fn front_lateral(
+    curve: &AxleCurve,
+    lf: f64,
+    vx: f64,
+    vy: f64,
+    r: f64,
+    sd: f64,
+    cd: f64,
+) -> f64 {
+    let (vxw, vyw) = front_wheel_velocity(lf, vx, vy, r, sd, cd);
+    curve.force(slip_angle(vxw, vyw))
+}
+
+/// [`front_lateral`] with its partials in `v_x, v_y, r, δ`.
+#[inline]
+#[must_use]
+pub(crate) fn front_lateral_d(
+    curve: &AxleCurve,
+    lf: f64,
+    vx: f64,
+    vy: f64,
+    r: f64,
+    sd: f64,
+    cd: f64,
+) -> FrontLateral {
+    let (vxw, vyw) = front_wheel_velocity(lf, vx, vy, r, sd, cd);
+    let (alpha, da_dvxw, da_dvyw) = slip_angle_d(vxw, vyw);
+    let (fy, dfy) = curve.force_d(alpha);
+    // ∂(vxw, vyw)/∂(vx, vy, r, δ) = [[cδ, sδ, l_f sδ, vyw], [−sδ, cδ, l_f cδ, −vxw]].
+    let d_vx = dfy * (da_dvxw * cd - da_dvyw * sd);
+    let d_vy = dfy * (da_dvxw * sd + da_dvyw * cd);
+    FrontLateral {
+        fy,
+        d_vx,
+        d_vy,
+        d_r: lf * d_vy,
+        d_delta: dfy * (da_dvxw * vyw - da_dvyw * vxw),
+    }
+}
+
+/// Rear axle lateral force, `F_y,r = C_r(α(v_x, v_y − l_r r))`.
+#[inline]
+#[must_use]
+pub(crate) fn rear_lateral(curve: &AxleCurve, lr: f64, vx: f64, vy: f64, r: f64) -> f64 {
+    curve.force(slip_angle(vx, vy - lr * r))
+}
+
+/// [`rear_lateral`] with its partials in `v_x, v_y, r`.
+#[inline]
+#[must_use]
+pub(crate) fn rear_lateral_d(curve: &AxleCurve, lr: f64, vx: f64, vy: f64, r: f64) -> RearLateral {
+    let (alpha, da_dvx, da_dvy) = slip_angle_d(vx, vy - lr * r);
+    let (fy, dfy) = curve.force_d(alpha);
+    RearLateral { fy, d_vx: dfy * da_dvx, d_vy: dfy * da_dvy, d_r: -lr * dfy * da_dvy }
+}
+
+/// One classic RK4 step of length `h` for `ẋ = f(x)`.
+#[inline]
+#[must_use]
+pub(crate) fn rk4<const N: usize>(
+    x: &SVector<f64, N>,
+    h: f64,
+    f: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
+) -> SVector<f64, N> {
+    let k1 = f(x);
+    let k2 = f(&(x + k1 * (0.5 * h)));
+    let k3 = f(&(x + k2 * (0.5 * h)));
+    let k4 = f(&(x + k3 * h));
+    x + (k1 + (k2 + k3) * 2.0 + k4) * (h / 6.0)
+}
+
+/// `n` RK4 sub-steps covering `dt`.
+#[inline]
+#[must_use]
+pub(crate) fn rk4_substeps<const N: usize>(
+    x: &SVector<f64, N>,
+    dt: f64,
+    n: usize,
+    f: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
+) -> SVector<f64, N> {
+    let h = dt / n as f64;
+    let mut xk = rk4(x, h, &f);
+    for _ in 1..n {
+        xk = rk4(&xk, h, &f);
+    }
+    xk
+}
+
+/// `D ← E + alpha · A · D` in place, with `A` the first N columns of the N × M matrix
+/// `a_of`, of which only the columns `active` may be nonzero (in the vehicle models the
+/// columns of the positions X, Y are zero: nothing depends on where the car is). The
+/// inactive state columns of `D` and `E` are then zero as well and are left alone.
+#[inline]
+fn stage_update<const N: usize, const M: usize>(
+    d: &mut SMatrix<f64, N, M>,
+    alpha: f64,
+    a_of: &SMatrix<f64, N, M>,
+    e: &SMatrix<f64, N, M>,
+    active: Range<usize>,
+) {
+    // ArrayStorage is column-major `[[f64; N]; M]`.
+    let a = &a_of.data.0;
+    debug_assert!((0..N)
+        .filter(|k| !active.contains(k))
+        .all(|k| a[k].iter().chain(&d.data.0[k]).chain(&e.data.0[k]).all(|&v| v == 0.0)));
+    for (col, (dc, ec)) in d.data.0.iter_mut().zip(&e.data.0).enumerate() {
+        if col < N && !active.contains(&col) {
+            // ∂/∂(inactive state) is zero in every stage.
+            continue;
+        }
+        let mut acc = *ec;
+        for k in active.clone() {
+            let s = alpha * dc[k];
+            for (oi, ai) in acc.iter_mut().zip(&a[k]) {
+                *oi += ai * s;
+            }
+        }
+        *dc = acc;
+    }
+}
+
+/// `y += alpha · x` (plain loops over the column arrays, which the compiler unrolls).
+#[inline]
+fn add_scaled<const N: usize, const M: usize>(
+    y: &mut SMatrix<f64, N, M>,
+    alpha: f64,
+    x: &SMatrix<f64, N, M>,
+) {
+    for (yc, xc) in y.data.0.iter_mut().zip(&x.data.0) {
+        for (yi, xi) in yc.iter_mut().zip(xc) {
+            *yi += alpha * xi;
+        }
+    }
+}
+
+/// Split a stacked `[A | B | F]` (N × (N + 4)) into its blocks.
+#[inline]
+pub(crate) fn split_columns<const N: usize, const M: usize>(
+    j: &SMatrix<f64, N, M>,
+    a: &mut SMatrix<f64, N, N>,
+    b: &mut SMatrix<f64, N, 2>,
+    f: &mut SMatrix<f64, N, 2>,
+) {
+    debug_assert_eq!(M, N + 4);
+    let cols = &j.data.0;
+    a.data.0.copy_from_slice(&cols[..N]);
+    b.data.0.copy_from_slice(&cols[N..N + 2]);
+    f.data.0.copy_from_slice(&cols[N + 2..N + 4]);
+}
+
+/// One classic RK4 step of length `h` with the exact Jacobian of the discrete map.
+///
+/// Only the columns `active` of `∂f/∂x` may be nonzero (checked in debug builds).
+///
+/// `f(x, J)` returns `ẋ` and writes the stacked continuous Jacobian
+/// `J = [∂f/∂x | ∂f/∂w]` (N × M, `w` the held inputs) into every entry of `J`. On return
+/// `jac` holds `[∂x⁺/∂x | ∂x⁺/∂w]`. With stage Jacobians `A_i = ∂f/∂x (x_i)`,
+/// `G_i = ∂f/∂w (x_i)` and `D_i = [∂k_i/∂x | ∂k_i/∂w]`:
+///
+/// ```text
+/// D_1 = [A_1 | G_1]
+/// D_2 = [A_2 | G_2] + (h/2) A_2 D_1,   D_3 = [A_3 | G_3] + (h/2) A_3 D_2,
+/// D_4 = [A_4 | G_4] + h A_4 D_3,
+/// [∂x⁺/∂x | ∂x⁺/∂w] = [I | 0] + (h/6)(D_1 + 2 D_2 + 2 D_3 + D_4).
+/// ```
+#[inline]
+pub(crate) fn rk4_jac<const N: usize, const M: usize>(
+    x: &SVector<f64, N>,
+    h: f64,
+    active: Range<usize>,
+    jac: &mut SMatrix<f64, N, M>,
+    f: impl Fn(&SVector<f64, N>, &mut SMatrix<f64, N, M>) -> SVector<f64, N>,
+) -> SVector<f64, N> {
+    // `d` holds D_i, `sum` accumulates D_1 + 2 D_2 + 2 D_3 + D_4.
+    let mut d = SMatrix::<f64, N, M>::zeros();
+    let k1 = f(x, &mut d);
+    let mut sum = d;
+    let mut j = SMatrix::<f64, N, M>::zeros();
+    let mut stage = |xs: &SVector<f64, N>, c: f64, d: &mut SMatrix<f64, N, M>| {
+        let k = f(xs, &mut j);
+        stage_update(d, c, &j, &j, active.clone());
+        k
+    };
+    let k2 = stage(&(x + k1 * (0.5 * h)), 0.5 * h, &mut d);
+    add_scaled(&mut sum, 2.0, &d);
+    let k3 = stage(&(x + k2 * (0.5 * h)), 0.5 * h, &mut d);
+    add_scaled(&mut sum, 2.0, &d);
+    let k4 = stage(&(x + k3 * h), h, &mut d);
+    add_scaled(&mut sum, 1.0, &d);
+    // [∂x⁺/∂x | ∂x⁺/∂w] = [I | 0] + (h/6) sum.
+    *jac = SMatrix::identity();
+    add_scaled(jac, h / 6.0, &sum);
+    x + (k1 + (k2 + k3) * 2.0 + k4) * (h / 6.0)
+}
+
+/// `n` RK4 sub-steps covering `dt`, with the Jacobian of the whole step chained through
+/// the sub-steps: `[Φ_x | Φ_w] ← [A_k Φ_x | A_k Φ_w + G_k]`.
+#[inline]
+pub(crate) fn rk4_jac_substeps<const N: usize, const M: usize>(
+    x: &SVector<f64, N>,
+    dt: f64,
+    n: usize,
+    active: Range<usize>,
+    jac: &mut SMatrix<f64, N, M>,
+    f: impl Fn(&SVector<f64, N>, &mut SMatrix<f64, N, M>) -> SVector<f64, N>,
+) -> SVector<f64, N> {
+    let h = dt / n as f64;
+    let mut xk = rk4_jac(x, h, active.clone(), jac, &f);
+    if n > 1 {
+        let mut js = SMatrix::<f64, N, M>::zeros();
+        for _ in 1..n {
+            xk = rk4_jac(&xk, h, active.clone(), &mut js, &f);
+            // Φ ← [0 | G_k] + A_k Φ.
+            let mut g = js;
+            g.data.0[..N].fill([0.0; N]);
+            // The sub-step's ∂x⁺/∂x has the identity in every column.
+            stage_update(jac, 1.0, &js, &g, 0..N);
+        }
+    }
+    xk
+}
