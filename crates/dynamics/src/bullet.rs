@@ -585,10 +585,11 @@ pub(crate) fn rk4_jac<const N: usize, const M: usize>(
     jac: &mut SMatrix<f64, N, M>,
     f: impl Fn(&SVector<f64, N>, &mut SMatrix<f64, N, M>) -> SVector<f64, N>,
 ) -> SVector<f64, N> {
-    // `d` holds D_i, `sum` accumulates D_1 + 2 D_2 + 2 D_3 + D_4.
+    // `d` holds D_i; `jac` accumulates [I | 0] + (h/6)(D_1 + 2 D_2 + 2 D_3 + D_4).
     let mut d = SMatrix::<f64, N, M>::zeros();
     let k1 = f(x, &mut d);
-    let mut sum = d;
+    *jac = SMatrix::identity();
+    add_scaled(jac, h / 6.0, &d);
     let mut j = SMatrix::<f64, N, M>::zeros();
     let mut stage = |xs: &SVector<f64, N>, c: f64, d: &mut SMatrix<f64, N, M>| {
         let k = f(xs, &mut j);
@@ -596,14 +597,11 @@ pub(crate) fn rk4_jac<const N: usize, const M: usize>(
         k
     };
     let k2 = stage(&(x + k1 * (0.5 * h)), 0.5 * h, &mut d);
-    add_scaled(&mut sum, 2.0, &d);
+    add_scaled(jac, h / 3.0, &d);
     let k3 = stage(&(x + k2 * (0.5 * h)), 0.5 * h, &mut d);
-    add_scaled(&mut sum, 2.0, &d);
+    add_scaled(jac, h / 3.0, &d);
     let k4 = stage(&(x + k3 * h), h, &mut d);
-    add_scaled(&mut sum, 1.0, &d);
-    // [∂x⁺/∂x | ∂x⁺/∂w] = [I | 0] + (h/6) sum.
-    *jac = SMatrix::identity();
-    add_scaled(jac, h / 6.0, &sum);
+    add_scaled(jac, h / 6.0, &d);
     x + (k1 + (k2 + k3) * 2.0 + k4) * (h / 6.0)
 }
 
