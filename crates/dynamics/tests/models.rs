@@ -10,7 +10,34 @@ use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetSt
 use nalgebra::{SMatrix, SVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::f64::consts::PI;
+
+/// Counts heap allocations made by the current thread (tests run on several threads).
+struct CountingAlloc;
+
+thread_local! {
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+// SAFETY: defers to the system allocator; only adds a thread-local counter.
+unsafe impl GlobalAlloc for CountingAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.with(|n| n.set(n.get() + 1));
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAlloc = CountingAlloc;
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(Cell::get)
+}
 
 const DT: f64 = 0.05;
 const MU: f64 = 0.9;
@@ -614,5 +641,38 @@ fn explicit_step_is_stable_in_its_speed_range() {
         let mut j = TargetJacobians::default();
         target.step_jac(&target_state(7.0, 0.0, 0.0, 0.0), &TargetInput::zeros(), &ContactInput::none(), &mut j);
         assert!(spectral_radius(&j.a, &TARGET_DYN) > 1.5, "{name}: 4dof single step stable at 7 m/s?");
+    }
+}
+
+#[test]
+fn stepping_does_not_allocate() {
+    let set = ParamSet::builtin("full_size").unwrap();
+    let c = ContactInput {
+        fc: Vec2::new(8e3, -1e3),
+        gamma: 2.0,
+        point_in_body: Vec2::new(-1.8, -0.7),
+    };
+    for n in [1, 3] {
+        let bullet = BulletModel::new(&set.bullet, MU, DT).with_substeps(n);
+        let mut target = FourDofTarget::new(&set.target, MU, DT).with_substeps(n);
+        let xb = BulletState::new(1.0, 2.0, 0.3, 15.0, 0.5, 0.2);
+        let ub = BulletInput::new(0.05, 100.0);
+        let xt = TargetState::from([14.0, -0.4, 0.2, -0.1, 0.05, 0.01, 5.0, 1.0]);
+        let ut = TargetInput::new(-0.02, 300.0);
+        let mut jb = BulletJacobians::default();
+        let mut jt = TargetJacobians::default();
+        let before = allocations();
+        let mut sink = 0.0;
+        for _ in 0..10 {
+            sink += bullet.step(&xb, &ub, &c)[0];
+            sink += bullet.step_jac(&xb, &ub, &c, &mut jb)[0];
+            sink += bullet.derivative(&xb, &ub, &c)[0];
+            sink += target.step(&xt, &ut, &c)[0];
+            sink += target.step_jac(&xt, &ut, &c, &mut jt)[0];
+            sink += target.derivative(&xt, &ut, &c)[0];
+        }
+        let after = allocations();
+        assert!(sink.is_finite());
+        assert_eq!(after - before, 0, "{n} sub-steps: the models allocated {} times", after - before);
     }
 }
