@@ -41,13 +41,20 @@ fn samples(set: &ParamSet) -> Vec<Sample> {
             let r = rng.random_range(-0.8..0.8);
             let (x, y) = (rng.random_range(0.0..300.0), rng.random_range(-5.0..5.0));
             let in_contact = k % 2 == 1;
-            let f_n = if in_contact { rng.random_range(0.0..2e4) } else { 0.0 };
+            let f_n = if in_contact {
+                rng.random_range(0.0..2e4)
+            } else {
+                0.0
+            };
             let fc = Vec2::new(f_n, rng.random_range(-0.4..0.4) * f_n);
             let gamma = psi + rng.random_range(1.0..2.0);
             let rear = pt.length - pt.cg_to_front;
             Sample {
                 xb: BulletState::new(x - 3.0, y - 1.5, psi, speed * 1.05, speed * beta.sin(), r),
-                ub: BulletInput::new(rng.random_range(-0.2..0.2), rng.random_range(0.0..pb.drive_torque_max)),
+                ub: BulletInput::new(
+                    rng.random_range(-0.2..0.2),
+                    rng.random_range(0.0..pb.drive_torque_max),
+                ),
                 cb: ContactInput {
                     fc,
                     gamma,
@@ -63,7 +70,10 @@ fn samples(set: &ParamSet) -> Vec<Sample> {
                     x,
                     y,
                 ]),
-                ut: TargetInput::new(rng.random_range(-0.2..0.2), rng.random_range(0.0..pt.brake_torque_max)),
+                ut: TargetInput::new(
+                    rng.random_range(-0.2..0.2),
+                    rng.random_range(0.0..pt.brake_torque_max),
+                ),
                 ct: ContactInput {
                     fc,
                     gamma,
@@ -96,7 +106,12 @@ fn models(c: &mut Criterion) {
         b.iter(|| {
             i = (i + 1) % STATES;
             let s = &data[i];
-            let xn = bullet.step_jac(black_box(&s.xb), black_box(&s.ub), black_box(&s.cb), &mut jac);
+            let xn = bullet.step_jac(
+                black_box(&s.xb),
+                black_box(&s.ub),
+                black_box(&s.cb),
+                &mut jac,
+            );
             black_box((&xn, &jac));
         });
     });
@@ -114,7 +129,12 @@ fn models(c: &mut Criterion) {
         b.iter(|| {
             i = (i + 1) % STATES;
             let s = &data[i];
-            let xn = target.step_jac(black_box(&s.xt), black_box(&s.ut), black_box(&s.ct), &mut jac);
+            let xn = target.step_jac(
+                black_box(&s.xt),
+                black_box(&s.ut),
+                black_box(&s.ct),
+                &mut jac,
+            );
             black_box((&xn, &jac));
         });
     });
@@ -124,7 +144,12 @@ fn models(c: &mut Criterion) {
         b.iter(|| {
             i = (i + 1) % STATES;
             let s = &data[i];
-            let xn = target4.step_jac(black_box(&s.xt), black_box(&s.ut), black_box(&s.ct), &mut jac);
+            let xn = target4.step_jac(
+                black_box(&s.xt),
+                black_box(&s.ut),
+                black_box(&s.ct),
+                &mut jac,
+            );
             black_box((&xn, &jac));
         });
     });

@@ -8,8 +8,17 @@ use std::hint::black_box;
 use std::time::Duration;
 
 fn pit_episode(p: &mut Plant) {
-    let target = VehicleInit { vx: 15.0, ..Default::default() };
-    let bullet = VehicleInit { x: -3.9, y: -2.4, yaw: 20f64.to_radians(), vx: 19.0, ..Default::default() };
+    let target = VehicleInit {
+        vx: 15.0,
+        ..Default::default()
+    };
+    let bullet = VehicleInit {
+        x: -3.9,
+        y: -2.4,
+        yaw: 20f64.to_radians(),
+        vx: 19.0,
+        ..Default::default()
+    };
     p.reset(&bullet, &target);
     // 10 s: 0.5 s pushing, then braking; the target spins and slides.
     for k in 0..10_000u32 {

@@ -21,8 +21,20 @@ fn main() {
     let set = ParamSet::builtin("full_size").expect("built-in set");
     println!("| manoeuvre (full_size) | max pos err (m) | max heading err (rad) | RMS r err / peak r (rad/s) | peak sideslip (rad) | 1-step pos err (m) | 1-step heading err (rad) | 1-step vel err (m/s) |");
     println!("|---|---|---|---|---|---|---|---|");
-    row("lane change 20 m/s, 0.02 rad, mu 0.9", &lane_change(&set, 0.9, 20.0, 0.02));
-    row("lane change 15 m/s, 0.03 rad, mu 0.5", &lane_change(&set, 0.5, 15.0, 0.03));
-    row("PIT push 15 m/s + 4 m/s, mu 0.9", &pit_push(&set, 0.9, 15.0, 4.0));
-    row("PIT push 20 m/s + 3 m/s, mu 0.5", &pit_push(&set, 0.5, 20.0, 3.0));
+    row(
+        "lane change 20 m/s, 0.02 rad, mu 0.9",
+        &lane_change(&set, 0.9, 20.0, 0.02),
+    );
+    row(
+        "lane change 15 m/s, 0.03 rad, mu 0.5",
+        &lane_change(&set, 0.5, 15.0, 0.03),
+    );
+    row(
+        "PIT push 15 m/s + 4 m/s, mu 0.9",
+        &pit_push(&set, 0.9, 15.0, 4.0),
+    );
+    row(
+        "PIT push 20 m/s + 3 m/s, mu 0.5",
+        &pit_push(&set, 0.5, 20.0, 3.0),
+    );
 }

@@ -65,7 +65,11 @@ pub struct BulletJacobians {
 
 impl Default for BulletJacobians {
     fn default() -> Self {
-        Self { a: SMatrix::zeros(), b: SMatrix::zeros(), f: SMatrix::zeros() }
+        Self {
+            a: SMatrix::zeros(),
+            b: SMatrix::zeros(),
+            f: SMatrix::zeros(),
+        }
     }
 }
 
@@ -297,7 +301,11 @@ impl Held {
     #[inline]
     pub(crate) fn new(delta: f64, c: &ContactInput, sign: f64) -> Self {
         let (sd, cd) = delta.sin_cos();
-        Self { sd, cd, contact: HeldContact::new(c, sign) }
+        Self {
+            sd,
+            cd,
+            contact: HeldContact::new(c, sign),
+        }
     }
 }
 
@@ -332,7 +340,13 @@ impl HeldContact {
     #[inline]
     pub(crate) fn new(c: &ContactInput, sign: f64) -> Self {
         let (sg, cg) = c.gamma.sin_cos();
-        Self { fc: c.fc * sign, sign, sg, cg, point: c.point_in_body }
+        Self {
+            fc: c.fc * sign,
+            sign,
+            sg,
+            cg,
+            point: c.point_in_body,
+        }
     }
 
     /// `sin(γ − ψ)`, `cos(γ − ψ)` from the heading's sine and cosine.
@@ -465,7 +479,12 @@ pub(crate) fn rear_lateral(curve: &AxleCurve, lr: f64, vx: f64, vy: f64, r: f64)
 pub(crate) fn rear_lateral_d(curve: &AxleCurve, lr: f64, vx: f64, vy: f64, r: f64) -> RearLateral {
     let (alpha, da_dvx, da_dvy) = slip_angle_d(vx, vy - lr * r);
     let (fy, dfy) = curve.force_d(alpha);
-    RearLateral { fy, d_vx: dfy * da_dvx, d_vy: dfy * da_dvy, d_r: -lr * dfy * da_dvy }
+    RearLateral {
+        fy,
+        d_vx: dfy * da_dvx,
+        d_vy: dfy * da_dvy,
+        d_r: -lr * dfy * da_dvy,
+    }
 }
 
 /// One classic RK4 step of length `h` for `ẋ = f(x)`.
@@ -514,9 +533,11 @@ fn stage_update<const N: usize, const M: usize>(
 ) {
     // ArrayStorage is column-major `[[f64; N]; M]`.
     let a = &a_of.data.0;
-    debug_assert!((0..N)
-        .filter(|k| !active.contains(k))
-        .all(|k| a[k].iter().chain(&d.data.0[k]).chain(&e.data.0[k]).all(|&v| v == 0.0)));
+    debug_assert!((0..N).filter(|k| !active.contains(k)).all(|k| a[k]
+        .iter()
+        .chain(&d.data.0[k])
+        .chain(&e.data.0[k])
+        .all(|&v| v == 0.0)));
     for (col, (dc, ec)) in d.data.0.iter_mut().zip(&e.data.0).enumerate() {
         if col < N && !active.contains(&col) {
             // ∂/∂(inactive state) is zero in every stage.

@@ -61,7 +61,8 @@ fn agreement(model: &mut FourDofTarget, samples: &[Sample]) -> Agreement {
         let y = model.step(&s.x, &s.u, &s.c);
         e_pos += pos_err(&y, truth);
         e_head += wrap_angle(y[idx::PSI] - truth[idx::PSI]).abs();
-        e_vel += ((y[idx::VX] - truth[idx::VX]).powi(2) + (y[idx::VY] - truth[idx::VY]).powi(2)).sqrt();
+        e_vel +=
+            ((y[idx::VX] - truth[idx::VX]).powi(2) + (y[idx::VY] - truth[idx::VY]).powi(2)).sqrt();
     }
     let nf = n as f64;
     Agreement {
@@ -83,10 +84,24 @@ fn pos_err(a: &TargetState, b: &TargetState) -> f64 {
 /// A gentle single lane change of the target alone: full-sine steer of `amplitude` rad over
 /// 2.5 s at `speed` m/s, speed held by a drive-torque loop in the plant, 5 s in all.
 pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Agreement {
-    let mut plant = Plant::new(params, PlantConfig { mu, ..PlantConfig::default() }).expect("valid parameters");
+    let mut plant = Plant::new(
+        params,
+        PlantConfig {
+            mu,
+            ..PlantConfig::default()
+        },
+    )
+    .expect("valid parameters");
     plant.reset(
-        &VehicleInit { x: -1000.0, y: -50.0, ..VehicleInit::default() },
-        &VehicleInit { vx: speed, ..VehicleInit::default() },
+        &VehicleInit {
+            x: -1000.0,
+            y: -50.0,
+            ..VehicleInit::default()
+        },
+        &VehicleInit {
+            vx: speed,
+            ..VehicleInit::default()
+        },
     );
     let per_sample = (DT / plant.dt()).round() as usize;
     let mut samples = Vec::new();
@@ -96,7 +111,11 @@ pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Ag
         let body = plant.body(Which::Target);
         // The model is fed the plant's actual (lagged, rate-limited) steer angle.
         let u = TargetInput::new(body.steer, 0.0);
-        samples.push(Sample { x: plant.target_state(), u, c: ContactInput::none() });
+        samples.push(Sample {
+            x: plant.target_state(),
+            u,
+            c: ContactInput::none(),
+        });
         for _ in 0..per_sample {
             let t_now = plant.time();
             let steer = if (0.5..0.5 + period).contains(&t_now) {
@@ -124,7 +143,14 @@ pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Ag
 /// nothing. The 4-DOF model is fed the plant's contact force averaged over each 0.05 s
 /// (impulse-preserving) with its direction and point of action; 3 s in all.
 pub fn pit_push(params: &ParamSet, mu: f64, target_speed: f64, dv: f64) -> Agreement {
-    let mut plant = Plant::new(params, PlantConfig { mu, ..PlantConfig::default() }).expect("valid parameters");
+    let mut plant = Plant::new(
+        params,
+        PlantConfig {
+            mu,
+            ..PlantConfig::default()
+        },
+    )
+    .expect("valid parameters");
     let t = &params.target;
     let b = &params.bullet;
     let yaw = 20f64.to_radians();
@@ -134,8 +160,17 @@ pub fn pit_push(params: &ParamSet, mu: f64, target_speed: f64, dv: f64) -> Agree
     let to_cg = crate::geometry::rotate(yaw, Vec2::new(-b.cg_to_front, -0.5 * b.width));
     let cg = corner + to_cg;
     plant.reset(
-        &VehicleInit { x: cg.x, y: cg.y, yaw, vx: target_speed + dv, ..VehicleInit::default() },
-        &VehicleInit { vx: target_speed, ..VehicleInit::default() },
+        &VehicleInit {
+            x: cg.x,
+            y: cg.y,
+            yaw,
+            vx: target_speed + dv,
+            ..VehicleInit::default()
+        },
+        &VehicleInit {
+            vx: target_speed,
+            ..VehicleInit::default()
+        },
     );
     let per_sample = (DT / plant.dt()).round() as usize;
     let mut samples: Vec<Sample> = Vec::new();
@@ -151,13 +186,19 @@ pub fn pit_push(params: &ParamSet, mu: f64, target_speed: f64, dv: f64) -> Agree
             }
             plant.step();
         }
-        let c = plant.take_contact_average().map_or_else(ContactInput::none, |r| ContactInput {
-            fc: r.fc,
-            gamma: r.gamma,
-            point_in_body: r.point_in_target,
-        });
+        let c = plant
+            .take_contact_average()
+            .map_or_else(ContactInput::none, |r| ContactInput {
+                fc: r.fc,
+                gamma: r.gamma,
+                point_in_body: r.point_in_target,
+            });
         let _ = k;
-        samples.push(Sample { x, u: TargetInput::zeros(), c });
+        samples.push(Sample {
+            x,
+            u: TargetInput::zeros(),
+            c,
+        });
     }
     let mut model = FourDofTarget::new(&params.target, mu, DT);
     agreement(&mut model, &samples)

@@ -82,7 +82,11 @@ pub fn obb_contact(a: &Obb, b: &Obb) -> Option<ContactGeometry> {
             return None;
         }
         // Prefer A's faces on near-ties so that the reference face does not flicker.
-        let better = if i < 2 { overlap < best_overlap } else { overlap < best_overlap * (1.0 - 1e-9) - 1e-12 };
+        let better = if i < 2 {
+            overlap < best_overlap
+        } else {
+            overlap < best_overlap * (1.0 - 1e-9) - 1e-12
+        };
         if better {
             best_overlap = overlap;
             best = i;
@@ -91,24 +95,44 @@ pub fn obb_contact(a: &Obb, b: &Obb) -> Option<ContactGeometry> {
     let axis = axes[best];
     let normal = if d.dot(&axis) >= 0.0 { axis } else { -axis };
     // Reference face: on the body owning the axis, facing the other body.
-    let (reference, incident, ref_normal) = if best < 2 { (a, b, normal) } else { (b, a, -normal) };
-    Some(clip_contact(reference, incident, ref_normal, normal, best_overlap))
+    let (reference, incident, ref_normal) = if best < 2 {
+        (a, b, normal)
+    } else {
+        (b, a, -normal)
+    };
+    Some(clip_contact(
+        reference,
+        incident,
+        ref_normal,
+        normal,
+        best_overlap,
+    ))
 }
 
 /// Clip the incident edge against the reference face and average the penetrating points.
-fn clip_contact(reference: &Obb, incident: &Obb, ref_normal: Vec2, normal: Vec2, overlap: f64) -> ContactGeometry {
+fn clip_contact(
+    reference: &Obb,
+    incident: &Obb,
+    ref_normal: Vec2,
+    normal: Vec2,
+    overlap: f64,
+) -> ContactGeometry {
     let (rx, ry) = reference.axes();
     // Reference face: centre, tangent direction and half length.
-    let (face_half_extent, face_tangent, face_offset) = if ref_normal.dot(&rx).abs() > ref_normal.dot(&ry).abs() {
-        (reference.half.y, ry, reference.half.x)
-    } else {
-        (reference.half.x, rx, reference.half.y)
-    };
+    let (face_half_extent, face_tangent, face_offset) =
+        if ref_normal.dot(&rx).abs() > ref_normal.dot(&ry).abs() {
+            (reference.half.y, ry, reference.half.x)
+        } else {
+            (reference.half.x, rx, reference.half.y)
+        };
     let face_center = reference.center + ref_normal * face_offset;
     // Incident edge: the incident body's edge whose outward normal is most anti-parallel to
     // the reference normal.
     let (ix, iy) = incident.axes();
-    let candidates = [(ix, incident.half.x, iy, incident.half.y), (iy, incident.half.y, ix, incident.half.x)];
+    let candidates = [
+        (ix, incident.half.x, iy, incident.half.y),
+        (iy, incident.half.y, ix, incident.half.x),
+    ];
     let mut edge = (Vec2::zeros(), Vec2::zeros());
     let mut most_anti = f64::INFINITY;
     for (axis, offset, along, half_len) in candidates {
@@ -159,10 +183,19 @@ fn clip_contact(reference: &Obb, incident: &Obb, ref_normal: Vec2, normal: Vec2,
         // Degenerate (deep or grazing) configuration: fall back to the midpoint between the
         // two centres projected on the reference face.
         let mid = 0.5 * (reference.center + incident.center);
-        let on_face = face_center + face_tangent * (mid - face_center).dot(&face_tangent).clamp(lo, hi);
-        return ContactGeometry { depth: overlap, normal, point: on_face - ref_normal * (0.5 * overlap) };
+        let on_face =
+            face_center + face_tangent * (mid - face_center).dot(&face_tangent).clamp(lo, hi);
+        return ContactGeometry {
+            depth: overlap,
+            normal,
+            point: on_face - ref_normal * (0.5 * overlap),
+        };
     }
-    ContactGeometry { depth: max_depth.min(overlap).max(0.0), normal, point: sum / count }
+    ContactGeometry {
+        depth: max_depth.min(overlap).max(0.0),
+        normal,
+        point: sum / count,
+    }
 }
 
 /// Signed distance between two rectangles: the gap when apart (exact Euclidean distance
@@ -236,7 +269,11 @@ impl ContactLaw {
         if depth <= 0.0 {
             return 0.0;
         }
-        let spring = if self.exponent == 1.0 { self.stiffness * depth } else { self.stiffness * depth.powf(self.exponent) };
+        let spring = if self.exponent == 1.0 {
+            self.stiffness * depth
+        } else {
+            self.stiffness * depth.powf(self.exponent)
+        };
         (spring * (1.0 + self.damping * depth_rate)).max(0.0)
     }
 
@@ -278,7 +315,12 @@ mod tests {
         assert!(obb_contact(&a, &touching).is_none());
         assert!(obb_signed_distance(&a, &touching).abs() < 1e-12);
         // Rotated square beyond the corner: gap measured corner to corner.
-        let c = Obb::new(Vec2::new(2.0 + 1.0 + 2f64.sqrt(), 1.0 + 1.0 + 2f64.sqrt()), FRAC_PI_4, 2.0, 2.0);
+        let c = Obb::new(
+            Vec2::new(2.0 + 1.0 + 2f64.sqrt(), 1.0 + 1.0 + 2f64.sqrt()),
+            FRAC_PI_4,
+            2.0,
+            2.0,
+        );
         let gap = obb_signed_distance(&a, &c);
         assert!(gap > 0.0 && obb_contact(&a, &c).is_none(), "gap {gap}");
     }
@@ -293,7 +335,11 @@ mod tests {
         let c = obb_contact(&a, &b).expect("overlap");
         assert!((c.depth - 0.1).abs() < 1e-9, "depth {}", c.depth);
         assert!(close(c.normal, Vec2::new(0.0, 1.0), 1e-12));
-        assert!(close(c.point, Vec2::new(0.5, 0.95), 1e-9), "point {:?}", c.point);
+        assert!(
+            close(c.point, Vec2::new(0.5, 0.95), 1e-9),
+            "point {:?}",
+            c.point
+        );
         assert!((c.gamma() - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
         // Swapping the bodies flips the normal and keeps the point.
         let s = obb_contact(&b, &a).unwrap();
@@ -310,13 +356,21 @@ mod tests {
         assert!((c.depth - 0.1).abs() < 1e-12);
         assert!(close(c.normal, Vec2::new(0.0, 1.0), 1e-12));
         // Overlap of the faces spans x in [1, 2]: midpoint, halfway into the overlap.
-        assert!(close(c.point, Vec2::new(1.5, 0.95), 1e-12), "point {:?}", c.point);
+        assert!(
+            close(c.point, Vec2::new(1.5, 0.95), 1e-12),
+            "point {:?}",
+            c.point
+        );
         // A side-by-side push along x (rear bumper into front bumper).
         let d = Obb::new(Vec2::new(3.95, 0.5), 0.0, 4.0, 2.0);
         let e = obb_contact(&a, &d).unwrap();
         assert!((e.depth - 0.05).abs() < 1e-12);
         assert!(close(e.normal, Vec2::new(1.0, 0.0), 1e-12));
-        assert!(close(e.point, Vec2::new(1.975, 0.25), 1e-12), "point {:?}", e.point);
+        assert!(
+            close(e.point, Vec2::new(1.975, 0.25), 1e-12),
+            "point {:?}",
+            e.point
+        );
     }
 
     #[test]
@@ -348,12 +402,23 @@ mod tests {
 
     #[test]
     fn law_clamps_and_opposes_slip() {
-        let law = ContactLaw { stiffness: 4e5, exponent: 1.0, damping: 0.35, friction: 0.4, slip_speed: 0.1 };
+        let law = ContactLaw {
+            stiffness: 4e5,
+            exponent: 1.0,
+            damping: 0.35,
+            friction: 0.4,
+            slip_speed: 0.1,
+        };
         assert_eq!(law.normal_force(0.0, 5.0), 0.0);
         assert_eq!(law.normal_force(0.01, -10.0), 0.0, "never pulls");
         assert!((law.normal_force(0.01, 0.0) - 4000.0).abs() < 1e-9);
-        assert!(law.tangential_force(1000.0, 2.0) < 0.0 && law.tangential_force(1000.0, -2.0) > 0.0);
-        assert!((law.tangential_force(1000.0, 100.0) + 400.0).abs() < 1e-6, "saturates at μ F_n");
+        assert!(
+            law.tangential_force(1000.0, 2.0) < 0.0 && law.tangential_force(1000.0, -2.0) > 0.0
+        );
+        assert!(
+            (law.tangential_force(1000.0, 100.0) + 400.0).abs() < 1e-6,
+            "saturates at μ F_n"
+        );
     }
 
     #[test]
@@ -361,8 +426,19 @@ mod tests {
         // Prescribe closed penetration histories δ(t) ≥ 0 (in and out again) and integrate
         // the work the normal force does on the bodies, W = −∫ F_n dδ: it must be ≤ 0,
         // and = 0 without damping.
-        for (k, n, c) in [(4e5, 1.0, 0.35), (1e5, 1.5, 1.0), (7e5, 1.0, 0.0), (2e5, 1.3, 0.0)] {
-            let law = ContactLaw { stiffness: k, exponent: n, damping: c, friction: 0.4, slip_speed: 0.1 };
+        for (k, n, c) in [
+            (4e5, 1.0, 0.35),
+            (1e5, 1.5, 1.0),
+            (7e5, 1.0, 0.0),
+            (2e5, 1.3, 0.0),
+        ] {
+            let law = ContactLaw {
+                stiffness: k,
+                exponent: n,
+                damping: c,
+                friction: 0.4,
+                slip_speed: 0.1,
+            };
             for (amp, period, shape) in [(0.05, 0.15, 1.0), (0.1, 0.3, 3.0), (0.02, 0.05, 0.5)] {
                 let steps = 200_000;
                 let dt = period / f64::from(steps);
@@ -380,7 +456,10 @@ mod tests {
                 }
                 let scale = k * amp.powf(n) * amp;
                 if c == 0.0 {
-                    assert!(work.abs() < 1e-6 * scale, "elastic cycle must be lossless: {work}");
+                    assert!(
+                        work.abs() < 1e-6 * scale,
+                        "elastic cycle must be lossless: {work}"
+                    );
                 } else {
                     assert!(work < -1e-6 * scale, "damped cycle must dissipate: {work}");
                 }

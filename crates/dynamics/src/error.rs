@@ -9,10 +9,17 @@ pub enum ParamError {
     /// The TOML could not be parsed or did not match the schema (missing or unknown field,
     /// wrong type). The message from the parser names the field.
     #[error("{source_name}: {message}")]
-    Parse { source_name: String, message: String },
+    Parse {
+        source_name: String,
+        message: String,
+    },
     /// A field has a value outside its admissible range.
     #[error("{field} = {value}: {reason}")]
-    Invalid { field: String, value: f64, reason: &'static str },
+    Invalid {
+        field: String,
+        value: f64,
+        reason: &'static str,
+    },
     /// The file could not be read.
     #[error("cannot read {path}: {message}")]
     Io { path: String, message: String },

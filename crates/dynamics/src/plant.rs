@@ -33,7 +33,7 @@ use crate::geometry::{cross, rotate, Obb, Pose2, Vec2};
 use crate::params::{ParamSet, TyreParams, VehicleParams};
 use crate::road::Obstacle;
 use crate::target::TargetState;
-use crate::tyre::{combined_slip, slip_angle, V_LOW};
+use crate::tyre::{combined_slip4, slip_angle, V_LOW};
 use crate::GRAVITY;
 use nalgebra::SVector;
 
@@ -732,24 +732,27 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
     let mut m_z = 0.0;
     let mut fx_wheel = [0.0; 4];
     let mut kx_over_v = [0.0; 4];
-    for w in 0..4 {
-        let pos = c.wheel_pos[w];
-        let v = Vec2::new(v_o.x - b.r * pos.y, v_o.y + b.r * pos.x);
-        let front = w < 2;
-        // Wheel frame: front wheels are steered by δ.
-        let vw = if front { Vec2::new(cd * v.x + sd * v.y, -sd * v.x + cd * v.y) } else { v };
-        let denom = vw.x.abs().max(V_LOW);
-        if !tyres || fz[w] <= 0.0 {
-            continue;
+    if tyres {
+        // Wheel-frame velocities (front wheels steered by δ), slips, then all four tyres.
+        let mut kappa = [0.0; 4];
+        let mut alpha = [0.0; 4];
+        let mut denom = [0.0; 4];
+        for w in 0..4 {
+            let pos = c.wheel_pos[w];
+            let v = Vec2::new(v_o.x - b.r * pos.y, v_o.y + b.r * pos.x);
+            let vw = if w < 2 { Vec2::new(cd * v.x + sd * v.y, -sd * v.x + cd * v.y) } else { v };
+            denom[w] = vw.x.abs().max(V_LOW);
+            kappa[w] = (b.omega[w] * c.rw - vw.x) / denom[w];
+            alpha[w] = slip_angle(vw.x, vw.y);
         }
-        let kappa = (b.omega[w] * c.rw - vw.x) / denom;
-        let alpha = slip_angle(vw.x, vw.y);
-        let f = combined_slip(&c.tyre, c.mu_scale, fz[w], kappa, alpha);
-        fx_wheel[w] = f.fx;
-        kx_over_v[w] = f.kx / denom;
-        let fb = if front { Vec2::new(cd * f.fx - sd * f.fy, sd * f.fx + cd * f.fy) } else { Vec2::new(f.fx, f.fy) };
-        f_body += fb;
-        m_z += cross(pos - e, fb);
+        let forces = combined_slip4(&c.tyre, c.mu_scale, &fz, &kappa, &alpha);
+        for (w, f) in forces.iter().enumerate() {
+            fx_wheel[w] = f.fx;
+            kx_over_v[w] = f.kx / denom[w];
+            let fb = if w < 2 { Vec2::new(cd * f.fx - sd * f.fy, sd * f.fx + cd * f.fy) } else { Vec2::new(f.fx, f.fy) };
+            f_body += fb;
+            m_z += cross(c.wheel_pos[w] - e, fb);
+        }
     }
     // Aerodynamic drag at the c.g.
     if tyres {

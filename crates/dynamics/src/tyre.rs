@@ -113,28 +113,42 @@ pub struct TyreForces {
 /// `G_yκ = cos(r_Cy1 atan(B_yκ κ))`, `B_yκ = r_By1 cos(atan(r_By2 α))`;
 /// the weighting's argument is capped at π/2 so that a tyre sliding at large slip keeps
 /// a non-negative force share (the fitted weighting goes negative far outside its data).
+#[inline(always)]
 #[must_use]
 pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: f64) -> TyreForces {
-    if fz <= 0.0 {
-        return TyreForces::default();
-    }
-    let dfz = (fz - t.fz0) / t.fz0;
+    use std::f64::consts::FRAC_PI_2;
+    // Branch-free so that `combined_slip4` vectorises: evaluate at a load of at least 1 N
+    // and scale the forces back, which gives exactly zero force for a lifted wheel.
+    let fz_eval = fz.max(1.0);
+    let scale = fz.max(0.0) / fz_eval;
+    let dfz = (fz_eval - t.fz0) / t.fz0;
     // Pure longitudinal slip.
-    let kx = fz * (t.pkx1 + t.pkx2 * dfz) * (t.pkx3 * dfz).exp();
-    let dx = mu_scale * (t.pdx1 + t.pdx2 * dfz).max(0.05) * fz;
+    let kx = fz_eval * (t.pkx1 + t.pkx2 * dfz) * fastmath::exp_small(t.pkx3 * dfz);
+    let dx = mu_scale * (t.pdx1 + t.pdx2 * dfz).max(0.05) * fz_eval;
     let bx = kx / (t.pcx1 * dx);
     let fx0 = magic_formula(kappa, bx, t.pcx1, dx, t.pex1);
     // Pure lateral slip.
-    let ky = t.cornering_stiffness(fz);
-    let dy = mu_scale * (t.pdy1 + t.pdy2 * dfz).max(0.05) * fz;
+    let ky = t.cornering_stiffness(fz_eval);
+    let dy = mu_scale * (t.pdy1 + t.pdy2 * dfz).max(0.05) * fz_eval;
     let by = ky / (t.pcy1 * dy);
     let fy0 = -magic_formula(alpha, by, t.pcy1, dy, t.pey1);
     // Combined-slip weighting.
     let bxa = t.rbx1 / (1.0 + (t.rbx2 * kappa).powi(2)).sqrt();
-    let gxa = fastmath::cos((t.rcx1 * fastmath::atan((bxa * alpha).abs())).min(std::f64::consts::FRAC_PI_2));
+    let gxa = fastmath::cos((t.rcx1 * fastmath::atan((bxa * alpha).abs())).min(FRAC_PI_2));
     let byk = t.rby1 / (1.0 + (t.rby2 * alpha).powi(2)).sqrt();
-    let gyk = fastmath::cos((t.rcy1 * fastmath::atan((byk * kappa).abs())).min(std::f64::consts::FRAC_PI_2));
-    TyreForces { fx: fx0 * gxa, fy: fy0 * gyk, kx }
+    let gyk = fastmath::cos((t.rcy1 * fastmath::atan((byk * kappa).abs())).min(FRAC_PI_2));
+    TyreForces { fx: fx0 * gxa * scale, fy: fy0 * gyk * scale, kx: kx * scale }
+}
+
+/// [`combined_slip`] for the four tyres of a vehicle at once (written as a branch-free loop
+/// over lanes so that the compiler can evaluate tyres side by side).
+#[must_use]
+pub fn combined_slip4(t: &TyreParams, mu_scale: f64, fz: &[f64; 4], kappa: &[f64; 4], alpha: &[f64; 4]) -> [TyreForces; 4] {
+    let mut out = [TyreForces::default(); 4];
+    for i in 0..4 {
+        out[i] = combined_slip(t, mu_scale, fz[i], kappa[i], alpha[i]);
+    }
+    out
 }
 
 #[cfg(test)]
@@ -217,6 +231,21 @@ mod tests {
         let fx0 = combined_slip(&t, s, t.fz0, 0.05, 0.0).fx;
         let fx1 = combined_slip(&t, s, t.fz0, 0.05, 0.1).fx;
         assert!(fx1 < fx0 && fx1 > 0.0);
+    }
+
+    #[test]
+    fn four_lanes_match_scalar_and_lifted_wheels_carry_nothing() {
+        let t = tyre();
+        let s = t.mu_scale(0.7);
+        let fz = [0.0, 0.5 * t.fz0, t.fz0, 2.5 * t.fz0];
+        let kappa = [0.1, -0.05, 0.0, 0.4];
+        let alpha = [0.2, 0.0, -0.3, 1.4];
+        let four = combined_slip4(&t, s, &fz, &kappa, &alpha);
+        for i in 0..4 {
+            assert_eq!(four[i], combined_slip(&t, s, fz[i], kappa[i], alpha[i]));
+        }
+        assert_eq!(four[0], TyreForces::default());
+        assert!(four[3].fy < 0.0 && four[3].fx > 0.0);
     }
 
     #[test]
