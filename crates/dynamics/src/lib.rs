@@ -28,7 +28,6 @@ pub mod bullet;
 pub mod compare;
 pub mod contact;
 pub mod error;
-pub mod fastmath;
 pub mod geometry;
 pub mod params;
 pub mod plant;

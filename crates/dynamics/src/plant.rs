@@ -28,7 +28,6 @@
 
 use crate::contact::{obb_contact, ContactGeometry, ContactLaw};
 use crate::error::ParamError;
-use crate::fastmath;
 use crate::geometry::{cross, rotate, Obb, Pose2, Vec2};
 use crate::params::{ParamSet, TyreParams, VehicleParams};
 use crate::road::Obstacle;
@@ -702,7 +701,7 @@ fn lag_factor(dt: f64, tau: f64) -> f64 {
 /// One semi-implicit Euler step of one vehicle.
 #[allow(clippy::too_many_lines)]
 fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, tyres: bool) {
-    let (s, co) = fastmath::sin_cos(b.yaw);
+    let (s, co) = b.yaw.sin_cos();
     let to_body = |v: Vec2| Vec2::new(co * v.x + s * v.y, -s * v.x + co * v.y);
     let to_world = |v: Vec2| Vec2::new(co * v.x - s * v.y, s * v.x + co * v.y);
     let e = c.cg_offset(b);
@@ -727,7 +726,7 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
     ];
 
     // Tyre forces.
-    let (sd, cd) = fastmath::sin_cos(b.steer);
+    let (sd, cd) = b.steer.sin_cos();
     let mut f_body = Vec2::zeros();
     let mut m_z = 0.0;
     let mut fx_wheel = [0.0; 4];

@@ -9,7 +9,6 @@
 //! The road adhesion μ scales the peak: `λ_μ = μ / p_dy1`, so that at nominal load the
 //! lateral peak friction equals μ. Cornering and slip stiffness do not depend on μ.
 
-use crate::fastmath;
 use crate::params::TyreParams;
 
 /// Speed (m/s) below which slip denominators are regularised: `sqrt(v_x² + V_LOW²)` for the
@@ -22,7 +21,7 @@ pub const V_LOW: f64 = 0.5;
 #[inline]
 #[must_use]
 pub fn slip_angle(vx: f64, vy: f64) -> f64 {
-    fastmath::atan(vy / (vx * vx + V_LOW * V_LOW).sqrt())
+    (vy / (vx * vx + V_LOW * V_LOW).sqrt()).atan()
 }
 
 /// The Magic Formula `y = D sin(C atan(B x − E (B x − atan(B x))))`.
@@ -30,7 +29,7 @@ pub fn slip_angle(vx: f64, vy: f64) -> f64 {
 #[must_use]
 pub fn magic_formula(x: f64, b: f64, c: f64, d: f64, e: f64) -> f64 {
     let bx = b * x;
-    d * fastmath::sin(c * fastmath::atan(bx - e * (bx - fastmath::atan(bx))))
+    d * (c * (bx - e * (bx - bx.atan())).atan()).sin()
 }
 
 /// The Magic Formula and its derivative with respect to `x`.
@@ -38,11 +37,11 @@ pub fn magic_formula(x: f64, b: f64, c: f64, d: f64, e: f64) -> f64 {
 #[must_use]
 pub fn magic_formula_d(x: f64, b: f64, c: f64, d: f64, e: f64) -> (f64, f64) {
     let bx = b * x;
-    let inner = bx - e * (bx - fastmath::atan(bx));
+    let inner = bx - e * (bx - bx.atan());
     // d inner / dx = B (1 − E + E / (1 + (Bx)²))
     let dinner = b * (1.0 - e + e / (1.0 + bx * bx));
-    let phi = c * fastmath::atan(inner);
-    let (s, co) = fastmath::sin_cos(phi);
+    let phi = c * inner.atan();
+    let (s, co) = phi.sin_cos();
     (d * s, d * co * c * dinner / (1.0 + inner * inner))
 }
 
@@ -123,7 +122,7 @@ pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: 
     let scale = fz.max(0.0) / fz_eval;
     let dfz = (fz_eval - t.fz0) / t.fz0;
     // Pure longitudinal slip.
-    let kx = fz_eval * (t.pkx1 + t.pkx2 * dfz) * fastmath::exp_small(t.pkx3 * dfz);
+    let kx = fz_eval * (t.pkx1 + t.pkx2 * dfz) * (t.pkx3 * dfz).exp();
     let dx = mu_scale * (t.pdx1 + t.pdx2 * dfz).max(0.05) * fz_eval;
     let bx = kx / (t.pcx1 * dx);
     let fx0 = magic_formula(kappa, bx, t.pcx1, dx, t.pex1);
@@ -134,9 +133,9 @@ pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: 
     let fy0 = -magic_formula(alpha, by, t.pcy1, dy, t.pey1);
     // Combined-slip weighting.
     let bxa = t.rbx1 / (1.0 + (t.rbx2 * kappa).powi(2)).sqrt();
-    let gxa = fastmath::cos((t.rcx1 * fastmath::atan((bxa * alpha).abs())).min(FRAC_PI_2));
+    let gxa = (t.rcx1 * (bxa * alpha).abs().atan()).min(FRAC_PI_2).cos();
     let byk = t.rby1 / (1.0 + (t.rby2 * alpha).powi(2)).sqrt();
-    let gyk = fastmath::cos((t.rcy1 * fastmath::atan((byk * kappa).abs())).min(FRAC_PI_2));
+    let gyk = (t.rcy1 * (byk * kappa).abs().atan()).min(FRAC_PI_2).cos();
     TyreForces { fx: fx0 * gxa * scale, fy: fy0 * gyk * scale, kx: kx * scale }
 }
 
