@@ -92,12 +92,33 @@ pub struct BulletModel {
     substeps: usize,
 }
 
+/// Speed (m/s) down to which the default sub-stepping keeps the explicit step stable.
+pub const STABLE_DOWN_TO: f64 = 1.0;
+
+/// The number of RK4 sub-steps that keeps a step of `dt` inside RK4's stability region for
+/// the tyre eigenvalue `(C_f + C_r) / (m_eff v)` down to [`STABLE_DOWN_TO`], with margin
+/// (`|λ h| ≤ 2.5`; RK4's real-axis limit is 2.785). `m_eff` is the effective lateral mass.
+#[must_use]
+pub fn stable_substeps(dt: f64, cornering_sum: f64, m_eff: f64) -> usize {
+    let n = (dt * cornering_sum / (m_eff * STABLE_DOWN_TO * 2.5)).ceil();
+    if n.is_finite() && n >= 1.0 {
+        n as usize
+    } else {
+        1
+    }
+}
+
 impl BulletModel {
     /// The model of vehicle `p` on a road of adhesion `mu`, stepping over `dt` seconds.
-    /// The axle curves are the Magic Formula at the static axle loads.
+    /// The axle curves are the Magic Formula at the static axle loads. The step is split
+    /// into [`stable_substeps`] RK4 sub-steps so that it stays stable down to
+    /// [`STABLE_DOWN_TO`]; override with [`BulletModel::with_substeps`].
     #[must_use]
     pub fn new(p: &VehicleParams, mu: f64, dt: f64) -> Self {
         let (fz_front, fz_rear) = p.static_axle_loads();
+        let front = AxleCurve::new(&p.tyre, fz_front, mu);
+        let rear = AxleCurve::new(&p.tyre, fz_rear, mu);
+        let substeps = stable_substeps(dt, front.cornering_stiffness() + rear.cornering_stiffness(), p.mass);
         Self {
             mass: p.mass,
             inv_mass: 1.0 / p.mass,
@@ -108,15 +129,15 @@ impl BulletModel {
             tyre: p.tyre.clone(),
             fz_front,
             fz_rear,
-            front: AxleCurve::new(&p.tyre, fz_front, mu),
-            rear: AxleCurve::new(&p.tyre, fz_rear, mu),
+            front,
+            rear,
             dt,
-            substeps: 1,
+            substeps,
         }
     }
 
-    /// Split every step into `n` equal RK4 sub-steps (default 1; 0 is treated as 1). The
-    /// Jacobians stay exact (they are chained through the sub-steps).
+    /// Split every step into `n` equal RK4 sub-steps (0 is treated as 1), replacing the
+    /// default [`stable_substeps`]. The Jacobians stay exact (chained through the sub-steps).
     ///
     /// Explicit RK4 is stable only while the sub-step times the tyre eigenvalue
     /// `≈ (C_f + C_r)/(m v_x)` stays inside its stability region; at 0.05 s a single step

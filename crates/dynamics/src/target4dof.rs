@@ -27,7 +27,7 @@
 
 use crate::bullet::{
     front_lateral, front_lateral_d, rear_lateral, rear_lateral_d, rk4_jac_substeps,
-    rk4_substeps, split_columns, Held,
+    rk4_substeps, split_columns, stable_substeps, Held,
 };
 use crate::params::{TyreParams, VehicleParams};
 use crate::target::{idx, ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
@@ -77,13 +77,20 @@ pub struct FourDofTarget {
 }
 
 impl FourDofTarget {
-    /// The model of vehicle `p` on a road of adhesion `mu`, stepping over `dt` seconds.
+    /// The model of vehicle `p` on a road of adhesion `mu`, stepping over `dt` seconds, in
+    /// [`stable_substeps`] RK4 sub-steps (stable down to
+    /// [`STABLE_DOWN_TO`](crate::bullet::STABLE_DOWN_TO); the free roll lowers the effective
+    /// lateral mass to `m − (m_s h)²/I_xx`, which makes this model the stiffer of the two).
     #[must_use]
     pub fn new(p: &VehicleParams, mu: f64, dt: f64) -> Self {
         let (fz_front, fz_rear) = p.static_axle_loads();
         let h = p.roll_arm();
         let ms_h = p.sprung_mass * h;
         let ixx = p.ix_sprung + p.sprung_mass * h * h;
+        let front = AxleCurve::new(&p.tyre, fz_front, mu);
+        let rear = AxleCurve::new(&p.tyre, fz_rear, mu);
+        let m_eff = p.mass - ms_h * ms_h / ixx;
+        let substeps = stable_substeps(dt, front.cornering_stiffness() + rear.cornering_stiffness(), m_eff);
         Self {
             mass: p.mass,
             inv_mass: 1.0 / p.mass,
@@ -101,15 +108,15 @@ impl FourDofTarget {
             tyre: p.tyre.clone(),
             fz_front,
             fz_rear,
-            front: AxleCurve::new(&p.tyre, fz_front, mu),
-            rear: AxleCurve::new(&p.tyre, fz_rear, mu),
+            front,
+            rear,
             dt,
-            substeps: 1,
+            substeps,
         }
     }
 
-    /// Split every step into `n` equal RK4 sub-steps (default 1; 0 is treated as 1); the
-    /// Jacobians stay exact. See [`crate::bullet::BulletModel::with_substeps`].
+    /// Split every step into `n` equal RK4 sub-steps (0 is treated as 1), replacing the
+    /// default [`stable_substeps`]; the Jacobians stay exact. See [`crate::bullet::BulletModel::with_substeps`].
     #[must_use]
     pub fn with_substeps(mut self, n: usize) -> Self {
         self.substeps = n.max(1);

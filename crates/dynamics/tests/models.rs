@@ -637,10 +637,24 @@ fn explicit_step_is_stable_in_its_speed_range() {
         }
         // And below the range a single step does go unstable (so the ranges above are the
         // real limits, not loose bounds).
-        let mut target = FourDofTarget::new(&set.target, MU, DT);
+        let mut target = FourDofTarget::new(&set.target, MU, DT).with_substeps(1);
         let mut j = TargetJacobians::default();
         target.step_jac(&target_state(7.0, 0.0, 0.0, 0.0), &TargetInput::zeros(), &ContactInput::none(), &mut j);
         assert!(spectral_radius(&j.a, &TARGET_DYN) > 1.5, "{name}: 4dof single step stable at 7 m/s?");
+        // The default sub-stepping is stable down to STABLE_DOWN_TO.
+        let mut target = FourDofTarget::new(&set.target, MU, DT);
+        let bullet = BulletModel::new(&set.bullet, MU, DT);
+        for v in [dynamics::bullet::STABLE_DOWN_TO, 2.0, 5.0, 30.0] {
+            let mut j = TargetJacobians::default();
+            target.step_jac(&target_state(v, 0.0, 0.3, 0.0), &TargetInput::zeros(), &ContactInput::none(), &mut j);
+            let rho = spectral_radius(&j.a, &TARGET_DYN);
+            assert!(rho <= 1.0 + 1e-9, "{name}: default 4dof at {v} m/s: ρ(A) = {rho}");
+            let mut jb = BulletJacobians::default();
+            let xb = BulletState::new(0.0, 0.0, 0.3, v, 0.0, 0.0);
+            bullet.step_jac(&xb, &BulletInput::zeros(), &ContactInput::none(), &mut jb);
+            let rho = spectral_radius(&jb.a, &BULLET_DYN);
+            assert!(rho <= 1.0 + 1e-9, "{name}: default bullet at {v} m/s: ρ(A) = {rho}");
+        }
     }
 }
 
