@@ -256,3 +256,29 @@ fn bad_config_is_refused() {
         assert!(err.contains("plant."), "{err}");
     }
 }
+
+#[test]
+fn a_car_driving_into_a_parked_car_is_stopped_by_it() {
+    let mut p = plant(PlantConfig::default());
+    let obstacle = dynamics::road::Obstacle { x: 20.0, y: 0.0, heading: 0.0, vx: 0.0, vy: 0.0, length: 4.5, width: 1.8 };
+    let rear_of_obstacle = obstacle.x - 0.5 * obstacle.length;
+    p.set_obstacles(vec![obstacle]);
+    p.reset(&VehicleInit { x: -60.0, y: 20.0, ..Default::default() }, &VehicleInit { vx: 10.0, ..Default::default() });
+    let front = full().target.cg_to_front;
+    let mut hit = false;
+    let mut max_depth: f64 = 0.0;
+    for _ in 0..4000 {
+        p.step();
+        if let Some(c) = p.obstacle_contacts()[Which::Target as usize] {
+            hit = true;
+            assert_eq!(c.obstacle, 0);
+            assert!(c.normal_force >= 0.0);
+        }
+        max_depth = max_depth.max(p.target_state()[6] + front - rear_of_obstacle);
+    }
+    assert!(hit, "the obstacle contact is reported");
+    // A 10 m/s impact into a stiff barrier crushes a few tens of centimetres at most.
+    assert!(max_depth > 0.0 && max_depth < 0.5, "penetration {max_depth} m");
+    assert!(p.target_state()[0] < 1.0, "it does not drive through: vx {}", p.target_state()[0]);
+    assert!(p.obstacle_contacts()[Which::Bullet as usize].is_none());
+}
