@@ -116,8 +116,8 @@ impl BulletModel {
     #[must_use]
     pub fn new(p: &VehicleParams, mu: f64, dt: f64) -> Self {
         let (fz_front, fz_rear) = p.static_axle_loads();
-        let front = AxleCurve::new(&p.tyre, fz_front, mu);
-        let rear = AxleCurve::new(&p.tyre, fz_rear, mu);
+        let front = AxleCurve::control(&p.tyre, fz_front, mu);
+        let rear = AxleCurve::control(&p.tyre, fz_rear, mu);
         let substeps = stable_substeps(dt, front.cornering_stiffness() + rear.cornering_stiffness(), p.mass);
         Self {
             mass: p.mass,
@@ -150,8 +150,8 @@ impl BulletModel {
 
     /// Change the road adhesion: rebuilds both axle curves.
     pub fn set_mu(&mut self, mu: f64) {
-        self.front = AxleCurve::new(&self.tyre, self.fz_front, mu);
-        self.rear = AxleCurve::new(&self.tyre, self.fz_rear, mu);
+        self.front = AxleCurve::control(&self.tyre, self.fz_front, mu);
+        self.rear = AxleCurve::control(&self.tyre, self.fz_rear, mu);
     }
 
     /// The step length (s).

@@ -6,7 +6,7 @@
 //! brake torque at the wheels), contact `f_c = [F_n, F_t]` (the target receives `+f_c`):
 //!
 //! ```text
-//! F_x,f = −β T_b/R_w · tanh(vx/v_b),  F_x,r = −(1−β) T_b/R_w · tanh(vx/v_b)   (v_b = 0.5 m/s)
+//! F_x,f = −β T_b/R_w · s(vx),  F_x,r = −(1−β) T_b/R_w · s(vx),  s(v) = v/sqrt(v² + v_b²)   (v_b = 0.5 m/s)
 //! ΣF_x = F_x,f cosδ − F_y,f sinδ + F_x,r + F_cx
 //! ΣF_y = F_x,f sinδ + F_y,f cosδ + F_y,r + F_cy
 //! ΣM_z = l_f (F_x,f sinδ + F_y,f cosδ) − l_r F_y,r + M_c
@@ -35,7 +35,7 @@ use crate::tyre::AxleCurve;
 use crate::GRAVITY;
 use nalgebra::SMatrix;
 
-/// Speed (m/s) of the brake-force regularisation `tanh(vx / V_BRAKE)`.
+/// Speed (m/s) of the brake-force regularisation `vx / sqrt(vx² + V_BRAKE²)`.
 pub const V_BRAKE: f64 = 0.5;
 
 /// Number of target states.
@@ -87,8 +87,8 @@ impl FourDofTarget {
         let h = p.roll_arm();
         let ms_h = p.sprung_mass * h;
         let ixx = p.ix_sprung + p.sprung_mass * h * h;
-        let front = AxleCurve::new(&p.tyre, fz_front, mu);
-        let rear = AxleCurve::new(&p.tyre, fz_rear, mu);
+        let front = AxleCurve::control(&p.tyre, fz_front, mu);
+        let rear = AxleCurve::control(&p.tyre, fz_rear, mu);
         let m_eff = p.mass - ms_h * ms_h / ixx;
         let substeps = stable_substeps(dt, front.cornering_stiffness() + rear.cornering_stiffness(), m_eff);
         Self {
@@ -131,8 +131,8 @@ impl FourDofTarget {
 
     /// Change the road adhesion: rebuilds both axle curves.
     pub fn set_mu(&mut self, mu: f64) {
-        self.front = AxleCurve::new(&self.tyre, self.fz_front, mu);
-        self.rear = AxleCurve::new(&self.tyre, self.fz_rear, mu);
+        self.front = AxleCurve::control(&self.tyre, self.fz_front, mu);
+        self.rear = AxleCurve::control(&self.tyre, self.fz_rear, mu);
     }
 
     /// Steady-state roll gradient `dφ/da_y = −m_s h / (K_φ − m_s g h)` (rad per m/s²);
@@ -142,11 +142,13 @@ impl FourDofTarget {
         self.ms_h / self.roll_k
     }
 
-    /// Brake force factor `tanh(vx / V_BRAKE)` and its derivative in vx.
+    /// Brake force factor `s(vx) = vx / sqrt(vx² + V_BRAKE²)` (a smooth sign: the brake
+    /// opposes the motion) and its derivative `V_BRAKE² / (vx² + V_BRAKE²)^{3/2}`.
     #[inline]
     fn brake_factor(vx: f64) -> (f64, f64) {
-        let t = (vx / V_BRAKE).tanh();
-        (t, (1.0 - t * t) / V_BRAKE)
+        let q = vx * vx + V_BRAKE * V_BRAKE;
+        let inv = 1.0 / q.sqrt();
+        (vx * inv, V_BRAKE * V_BRAKE * inv / q)
     }
 
     /// The continuous-time dynamics `ẋ = f(x, u, f_c)`.
@@ -208,7 +210,7 @@ impl FourDofTarget {
         let (lf, lr, beta) = (self.lf, self.lr, self.bias);
         let (sp, cp) = psi.sin_cos();
 
-        // Brake forces F_x = −share · (T_b/R_w) · tanh(vx/v_b).
+        // Brake forces F_x = −share · (T_b/R_w) · s(vx).
         let (t, dt_dvx) = Self::brake_factor(vx);
         let fb = -fb_max * t;
         let dfb_dvx = -fb_max * dt_dvx;

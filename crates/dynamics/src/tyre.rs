@@ -29,7 +29,9 @@ pub fn slip_angle(vx: f64, vy: f64) -> f64 {
 #[must_use]
 pub fn magic_formula(x: f64, b: f64, c: f64, d: f64, e: f64) -> f64 {
     let bx = b * x;
-    d * (c * (bx - e * (bx - bx.atan())).atan()).sin()
+    // E = 0 (the control models' curves) saves an arc-tangent.
+    let inner = if e == 0.0 { bx } else { bx - e * (bx - bx.atan()) };
+    d * (c * inner.atan()).sin()
 }
 
 /// The Magic Formula and its derivative with respect to `x`.
@@ -37,9 +39,12 @@ pub fn magic_formula(x: f64, b: f64, c: f64, d: f64, e: f64) -> f64 {
 #[must_use]
 pub fn magic_formula_d(x: f64, b: f64, c: f64, d: f64, e: f64) -> (f64, f64) {
     let bx = b * x;
-    let inner = bx - e * (bx - bx.atan());
-    // d inner / dx = B (1 − E + E / (1 + (Bx)²))
-    let dinner = b * (1.0 - e + e / (1.0 + bx * bx));
+    // inner = B x − E (B x − atan(B x)), d inner / dx = B (1 − E + E / (1 + (Bx)²)).
+    let (inner, dinner) = if e == 0.0 {
+        (bx, b)
+    } else {
+        (bx - e * (bx - bx.atan()), b * (1.0 - e + e / (1.0 + bx * bx)))
+    };
     let phi = c * inner.atan();
     let (s, co) = phi.sin_cos();
     (d * s, d * co * c * dinner / (1.0 + inner * inner))
@@ -67,6 +72,15 @@ impl AxleCurve {
         let k = 2.0 * tyre.cornering_stiffness(fz);
         let c = tyre.pcy1;
         Self { b: k / (c * d), c, d, e: tyre.pey1 }
+    }
+
+    /// The curve the control-oriented models use: [`AxleCurve::new`] with the curvature
+    /// factor E set to 0, which saves one arc-tangent per evaluation. The built-in tyres
+    /// have |E_y| < 0.01, so the curve moves by less than 0.3 % of the peak; the cornering
+    /// stiffness and the peak are unchanged.
+    #[must_use]
+    pub fn control(tyre: &TyreParams, fz_axle: f64, mu: f64) -> Self {
+        Self { e: 0.0, ..Self::new(tyre, fz_axle, mu) }
     }
 
     /// Cornering stiffness B C D at zero slip (N/rad).
@@ -245,6 +259,24 @@ mod tests {
         }
         assert_eq!(four[0], TyreForces::default());
         assert!(four[3].fy < 0.0 && four[3].fx > 0.0);
+    }
+
+    #[test]
+    fn control_curve_keeps_stiffness_and_peak() {
+        let t = tyre();
+        let full = AxleCurve::new(&t, 2.0 * t.fz0, 0.8);
+        let ctrl = AxleCurve::control(&t, 2.0 * t.fz0, 0.8);
+        assert_eq!(full.cornering_stiffness(), ctrl.cornering_stiffness());
+        let peak = |c: &AxleCurve| (0..20_000).map(|i| -c.force(f64::from(i) * 5e-5)).fold(f64::MIN, f64::max);
+        assert!((peak(&full) - peak(&ctrl)).abs() < 1e-6 * full.d);
+        let worst = (0..2000).map(|i| (full.force(f64::from(i) * 1e-3) - ctrl.force(f64::from(i) * 1e-3)).abs()).fold(0.0, f64::max);
+        assert!(worst < 0.01 * full.d, "E = 0 moves the curve by {worst} N");
+        // The derivative's E = 0 path agrees with finite differences too.
+        for x in [-0.3, 0.0, 0.02, 0.2] {
+            let h = 1e-7;
+            let fd = (ctrl.force(x + h) - ctrl.force(x - h)) / (2.0 * h);
+            assert!((ctrl.force_d(x).1 - fd).abs() < 1e-5 * fd.abs().max(1.0));
+        }
     }
 
     #[test]
