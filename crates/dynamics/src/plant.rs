@@ -32,7 +32,7 @@ use crate::geometry::{cross, rotate, Obb, Pose2, Vec2};
 use crate::params::{ParamSet, TyreParams, VehicleParams};
 use crate::road::Obstacle;
 use crate::target::TargetState;
-use crate::tyre::{combined_slip4, slip_angle, V_LOW};
+use crate::tyre::{combined_slip4, tan_slip, V_LOW};
 use crate::GRAVITY;
 use nalgebra::SVector;
 
@@ -742,7 +742,7 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
             let vw = if w < 2 { Vec2::new(cd * v.x + sd * v.y, -sd * v.x + cd * v.y) } else { v };
             denom[w] = vw.x.abs().max(V_LOW);
             kappa[w] = (b.omega[w] * c.rw - vw.x) / denom[w];
-            alpha[w] = slip_angle(vw.x, vw.y);
+            alpha[w] = tan_slip(vw.x, vw.y);
         }
         let forces = combined_slip4(&c.tyre, c.mu_scale, &fz, &kappa, &alpha);
         for (w, f) in forces.iter().enumerate() {

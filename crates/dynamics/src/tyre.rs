@@ -16,6 +16,15 @@ use crate::params::TyreParams;
 /// vehicle comes to rest smoothly instead of chattering.
 pub const V_LOW: f64 = 0.5;
 
+/// Lateral slip `α* = tan α = v_y / sqrt(v_x² + V_LOW²)` of a wheel moving with wheel-frame
+/// velocity `(vx, vy)`: the slip the Magic Formula is evaluated on (MF-Tyre 5.2/6.1
+/// convention), one arc-tangent cheaper than the angle.
+#[inline]
+#[must_use]
+pub fn tan_slip(vx: f64, vy: f64) -> f64 {
+    vy / (vx * vx + V_LOW * V_LOW).sqrt()
+}
+
 /// Slip angle of a wheel moving with wheel-frame velocity `(vx, vy)`:
 /// `α = atan(v_y / sqrt(v_x² + V_LOW²))`.
 #[inline]
@@ -121,6 +130,11 @@ pub struct TyreForces {
 /// Magic Formula with combined slip and load sensitivity (MF-Tyre 5.2 / 6.1 structure
 /// without camber, shifts or aligning moment).
 ///
+/// `kappa` is the longitudinal slip κ and `alpha` the lateral slip *as MF-Tyre evaluates
+/// it*: `α* = tan α` (the plant passes `v_y / sqrt(v_x² + V_LOW²)` in the wheel frame, see
+/// [`tan_slip`]); for small slip α* ≈ α, and sliding sideways (α* → ±∞) gives the
+/// saturated force. The force opposes the slip: `F_y = −MF_y(α*)`.
+///
 /// Combined slip uses the cosine weighting functions
 /// `G_xα = cos(r_Cx1 atan(B_xα α))`, `B_xα = r_Bx1 cos(atan(r_Bx2 κ))` and
 /// `G_yκ = cos(r_Cy1 atan(B_yκ κ))`, `B_yκ = r_By1 cos(atan(r_By2 α))`;
@@ -136,7 +150,7 @@ pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: 
     let scale = fz.max(0.0) / fz_eval;
     let dfz = (fz_eval - t.fz0) / t.fz0;
     // Pure longitudinal slip.
-    let kx = fz_eval * (t.pkx1 + t.pkx2 * dfz) * (t.pkx3 * dfz).exp();
+    let kx = fz_eval * (t.pkx1 + t.pkx2 * dfz) * exp_small(t.pkx3 * dfz);
     let dx = mu_scale * (t.pdx1 + t.pdx2 * dfz).max(0.05) * fz_eval;
     let bx = kx / (t.pcx1 * dx);
     let fx0 = magic_formula(kappa, bx, t.pcx1, dx, t.pex1);
@@ -151,6 +165,33 @@ pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: 
     let byk = t.rby1 / (1.0 + (t.rby2 * alpha).powi(2)).sqrt();
     let gyk = (t.rcy1 * (byk * kappa).abs().atan()).min(FRAC_PI_2).cos();
     TyreForces { fx: fx0 * gxa * scale, fy: fy0 * gyk * scale, kx: kx * scale }
+}
+
+/// `exp(x)` by its Taylor series for |x| ≤ 0.5 (relative error < 1e-13), libm beyond: the
+/// load-sensitivity exponent `p_Kx3 df_z` stays small.
+#[inline(always)]
+fn exp_small(x: f64) -> f64 {
+    if x.abs() > 0.5 {
+        return x.exp();
+    }
+    // Horner form of Σ_{k ≤ 13} x^k / k!.
+    const C: [f64; 14] = [
+        1.0,
+        1.0,
+        1.0 / 2.0,
+        1.0 / 6.0,
+        1.0 / 24.0,
+        1.0 / 120.0,
+        1.0 / 720.0,
+        1.0 / 5_040.0,
+        1.0 / 40_320.0,
+        1.0 / 362_880.0,
+        1.0 / 3_628_800.0,
+        1.0 / 39_916_800.0,
+        1.0 / 479_001_600.0,
+        1.0 / 6_227_020_800.0,
+    ];
+    C.iter().rev().fold(0.0, |acc, c| acc * x + c)
 }
 
 /// [`combined_slip`] for the four tyres of a vehicle at once (written as a branch-free loop
@@ -197,6 +238,14 @@ mod tests {
             let fd = (magic_formula(x + h, b, c, d, e) - magic_formula(x - h, b, c, d, e)) / (2.0 * h);
             let (_, an) = magic_formula_d(x, b, c, d, e);
             assert!((fd - an).abs() <= 1e-5 * an.abs().max(1.0), "x={x} fd={fd} an={an}");
+        }
+    }
+
+    #[test]
+    fn exp_small_matches_libm() {
+        for i in -600..=600 {
+            let x = f64::from(i) * 1e-3;
+            assert!((exp_small(x) - x.exp()).abs() <= 1e-13 * x.exp(), "x = {x}");
         }
     }
 
