@@ -40,7 +40,7 @@ fn vehicle_params(py: Python<'_>, params: &str, vehicle: &str) -> PyResult<Vehic
 }
 
 /// Road adhesion, step length and sub-step count, checked.
-fn settings(mu: f64, dt: f64, substeps: usize) -> PyResult<(f64, f64, usize)> {
+fn settings(mu: f64, dt: f64, substeps: Option<usize>) -> PyResult<(f64, f64, Option<usize>)> {
     if !(mu.is_finite() && mu > 0.0 && mu <= 1.5) {
         return Err(PyValueError::new_err(format!(
             "mu = {mu}: must lie in (0, 1.5]"
@@ -51,7 +51,7 @@ fn settings(mu: f64, dt: f64, substeps: usize) -> PyResult<(f64, f64, usize)> {
             "dt = {dt}: must lie in (0, 1] s"
         )));
     }
-    if !(1..=1000).contains(&substeps) {
+    if let Some(substeps) = substeps.filter(|n| !(1..=1000).contains(n)) {
         return Err(PyValueError::new_err(format!(
             "substeps = {substeps}: must lie in [1, 1000]"
         )));
@@ -94,19 +94,22 @@ pub struct BulletModel {
 #[pymethods]
 impl BulletModel {
     #[new]
-    #[pyo3(signature = (params = "full_size", mu = 0.9, dt = 0.05, vehicle = "bullet", *, substeps = 1))]
+    #[pyo3(signature = (params = "full_size", mu = 0.9, dt = 0.05, vehicle = "bullet", *, substeps = None))]
     fn new(
         py: Python<'_>,
         params: &str,
         mu: f64,
         dt: f64,
         vehicle: &str,
-        substeps: usize,
+        substeps: Option<usize>,
     ) -> PyResult<Self> {
         let (mu, dt, substeps) = settings(mu, dt, substeps)?;
         let v = vehicle_params(py, params, vehicle)?;
         Ok(Self {
-            inner: CoreBullet::new(&v, mu, dt).with_substeps(substeps),
+            inner: match substeps {
+                Some(n) => CoreBullet::new(&v, mu, dt).with_substeps(n),
+                None => CoreBullet::new(&v, mu, dt),
+            },
         })
     }
 
@@ -187,19 +190,22 @@ pub struct FourDofTarget {
 #[pymethods]
 impl FourDofTarget {
     #[new]
-    #[pyo3(signature = (params = "full_size", mu = 0.9, dt = 0.05, vehicle = "target", *, substeps = 1))]
+    #[pyo3(signature = (params = "full_size", mu = 0.9, dt = 0.05, vehicle = "target", *, substeps = None))]
     fn new(
         py: Python<'_>,
         params: &str,
         mu: f64,
         dt: f64,
         vehicle: &str,
-        substeps: usize,
+        substeps: Option<usize>,
     ) -> PyResult<Self> {
         let (mu, dt, substeps) = settings(mu, dt, substeps)?;
         let v = vehicle_params(py, params, vehicle)?;
         Ok(Self {
-            inner: CoreFourDof::new(&v, mu, dt).with_substeps(substeps),
+            inner: match substeps {
+                Some(n) => CoreFourDof::new(&v, mu, dt).with_substeps(n),
+                None => CoreFourDof::new(&v, mu, dt),
+            },
         })
     }
 

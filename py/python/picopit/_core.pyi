@@ -103,10 +103,11 @@ class BulletModel:
         dt: float = 0.05,
         vehicle: str = "bullet",
         *,
-        substeps: int = 1,
+        substeps: int | None = None,
     ) -> None:
         """``vehicle`` picks ``bullet`` or ``target`` out of the parameter set; ``substeps``
-        splits each step into equal RK4 sub-steps (Jacobians stay exact)."""
+        splits each step into equal RK4 sub-steps (Jacobians stay exact). ``None`` keeps the
+        model's default, the fewest sub-steps that are stable down to 1 m/s."""
     @property
     def dt(self) -> float: ...
     @property
@@ -146,7 +147,7 @@ class FourDofTarget:
         dt: float = 0.05,
         vehicle: str = "target",
         *,
-        substeps: int = 1,
+        substeps: int | None = None,
     ) -> None: ...
     @property
     def dt(self) -> float: ...
