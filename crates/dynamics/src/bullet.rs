@@ -118,7 +118,11 @@ impl BulletModel {
         let (fz_front, fz_rear) = p.static_axle_loads();
         let front = AxleCurve::control(&p.tyre, fz_front, mu);
         let rear = AxleCurve::control(&p.tyre, fz_rear, mu);
-        let substeps = stable_substeps(dt, front.cornering_stiffness() + rear.cornering_stiffness(), p.mass);
+        let substeps = stable_substeps(
+            dt,
+            front.cornering_stiffness() + rear.cornering_stiffness(),
+            p.mass,
+        );
         Self {
             mass: p.mass,
             inv_mass: 1.0 / p.mass,

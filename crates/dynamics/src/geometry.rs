@@ -32,7 +32,10 @@ pub struct Pose2 {
 impl Pose2 {
     #[must_use]
     pub fn new(x: f64, y: f64, yaw: f64) -> Self {
-        Self { p_in_world: Vec2::new(x, y), yaw }
+        Self {
+            p_in_world: Vec2::new(x, y),
+            yaw,
+        }
     }
 
     /// Map a point given in the body frame into the world frame.
@@ -62,7 +65,11 @@ pub struct Obb {
 impl Obb {
     #[must_use]
     pub fn new(center: Vec2, yaw: f64, length: f64, width: f64) -> Self {
-        Self { center, yaw, half: Vec2::new(0.5 * length, 0.5 * width) }
+        Self {
+            center,
+            yaw,
+            half: Vec2::new(0.5 * length, 0.5 * width),
+        }
     }
 
     /// Footprint of a vehicle whose reference point (c.g.) is at `pose`, with the body
@@ -70,7 +77,12 @@ impl Obb {
     #[must_use]
     pub fn vehicle_footprint(pose: &Pose2, length: f64, width: f64, cg_to_front: f64) -> Self {
         let center_in_body = Vec2::new(cg_to_front - 0.5 * length, 0.0);
-        Self::new(pose.world_from_body(center_in_body), pose.yaw, length, width)
+        Self::new(
+            pose.world_from_body(center_in_body),
+            pose.yaw,
+            length,
+            width,
+        )
     }
 
     /// Unit axes (x, y) of the rectangle in the world.

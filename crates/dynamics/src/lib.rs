@@ -38,7 +38,7 @@ pub mod tyre;
 
 pub use error::ParamError;
 pub use road::RoadError;
-pub use target::{ContactInput, TargetJacobians, TargetModel, TargetInput, TargetState};
+pub use target::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
 
 /// Standard gravity (m/s²).
 pub const GRAVITY: f64 = 9.80665;

@@ -240,7 +240,11 @@ enum Rule {
 
 fn check(prefix: &str, name: &str, value: f64, rule: Rule) -> Result<(), ParamError> {
     let bad = |reason: &'static str| {
-        Err(ParamError::Invalid { field: format!("{prefix}.{name}"), value, reason })
+        Err(ParamError::Invalid {
+            field: format!("{prefix}.{name}"),
+            value,
+            reason,
+        })
     };
     if !value.is_finite() {
         return bad("must be finite");
@@ -305,25 +309,45 @@ impl VehicleParams {
             brake_bias_front: Fraction, rolling_resistance: NonNegative, drag_area: NonNegative,
         });
         let invalid = |field: &str, value: f64, reason: &'static str| {
-            Err(ParamError::Invalid { field: format!("{prefix}.{field}"), value, reason })
+            Err(ParamError::Invalid {
+                field: format!("{prefix}.{field}"),
+                value,
+                reason,
+            })
         };
         if self.sprung_mass > self.mass {
             return invalid("sprung_mass", self.sprung_mass, "must not exceed mass");
         }
         if self.drive_torque_min > 0.0 {
-            return invalid("drive_torque_min", self.drive_torque_min, "must not be positive");
+            return invalid(
+                "drive_torque_min",
+                self.drive_torque_min,
+                "must not be positive",
+            );
         }
         if self.h_roll_axis >= self.h_sprung {
             return invalid("h_roll_axis", self.h_roll_axis, "must lie below h_sprung");
         }
         if self.cg_to_front >= self.length {
-            return invalid("cg_to_front", self.cg_to_front, "must be shorter than length");
+            return invalid(
+                "cg_to_front",
+                self.cg_to_front,
+                "must be shorter than length",
+            );
         }
         if self.cg_to_front < self.lf {
-            return invalid("cg_to_front", self.cg_to_front, "the front axle must lie inside the body");
+            return invalid(
+                "cg_to_front",
+                self.cg_to_front,
+                "the front axle must lie inside the body",
+            );
         }
         if self.length - self.cg_to_front < self.lr {
-            return invalid("length", self.length, "the rear axle must lie inside the body");
+            return invalid(
+                "length",
+                self.length,
+                "the rear axle must lie inside the body",
+            );
         }
         if self.steer_max >= 1.4 {
             return invalid("steer_max", self.steer_max, "must be below 1.4 rad");
@@ -338,7 +362,11 @@ impl VehicleParams {
             );
         }
         if self.pitch_stiffness <= self.sprung_mass * GRAVITY * self.h_sprung {
-            return invalid("pitch_stiffness", self.pitch_stiffness, "must exceed m_s g h_sprung");
+            return invalid(
+                "pitch_stiffness",
+                self.pitch_stiffness,
+                "must exceed m_s g h_sprung",
+            );
         }
         self.tyre.validate(&format!("{prefix}.tyre"))
     }
@@ -406,7 +434,10 @@ mod tests {
 
     #[test]
     fn unknown_set_is_refused() {
-        assert!(matches!(ParamSet::builtin("monster_truck"), Err(ParamError::UnknownSet(_))));
+        assert!(matches!(
+            ParamSet::builtin("monster_truck"),
+            Err(ParamError::UnknownSet(_))
+        ));
     }
 
     fn replace_line(src: &str, table: &str, key: &str, new_line: Option<&str>) -> String {
@@ -433,20 +464,78 @@ mod tests {
     }
 
     #[test]
+    fn every_numeric_field_refuses_nan_and_names_itself() {
+        // Property over the whole schema: any numeric field set to NaN (or inf) is refused
+        // with an error that names exactly that field, in every table, for both sets.
+        for set in ParamSet::BUILTIN {
+            let src = ParamSet::builtin_source(set).unwrap();
+            let mut table = String::new();
+            let mut checked = 0;
+            for line in src.lines() {
+                let t = line.trim();
+                if t.starts_with('[') {
+                    table = t.trim_matches(|c| c == '[' || c == ']').to_owned();
+                    continue;
+                }
+                let Some((key, value)) = t.split_once('=') else {
+                    continue;
+                };
+                let (key, value) = (key.trim(), value.split('#').next().unwrap().trim());
+                if value.parse::<f64>().is_err() && value.replace('_', "").parse::<f64>().is_err() {
+                    continue; // strings
+                }
+                for bad in ["nan", "inf", "-inf"] {
+                    let text = replace_line(src, &table, key, Some(&format!("{key} = {bad}")));
+                    let err = ParamSet::from_toml_str(&text, "prop.toml")
+                        .unwrap_err()
+                        .to_string();
+                    let field = format!("{table}.{key}");
+                    assert!(
+                        err.starts_with(&field),
+                        "{set}: {field} = {bad} gave {err:?}"
+                    );
+                }
+                checked += 1;
+            }
+            assert!(checked > 80, "{set}: only {checked} fields checked");
+        }
+    }
+
+    #[test]
     fn bad_fields_are_named() {
         let src = ParamSet::builtin_source("full_size").unwrap();
         let cases = [
             ("target", "mass", None, "mass"),
             ("target", "mass", Some("mass = -3.0"), "target.mass"),
             ("bullet", "iz", Some("iz = nan"), "bullet.iz"),
-            ("bullet.tyre", "pdy1", Some("pdy1 = inf"), "bullet.tyre.pdy1"),
-            ("contact", "damping", Some("damping = -1.0\nwobble = 2.0"), "wobble"),
-            ("target", "brake_bias_front", Some("brake_bias_front = 1.5"), "target.brake_bias_front"),
+            (
+                "bullet.tyre",
+                "pdy1",
+                Some("pdy1 = inf"),
+                "bullet.tyre.pdy1",
+            ),
+            (
+                "contact",
+                "damping",
+                Some("damping = -1.0\nwobble = 2.0"),
+                "wobble",
+            ),
+            (
+                "target",
+                "brake_bias_front",
+                Some("brake_bias_front = 1.5"),
+                "target.brake_bias_front",
+            ),
         ];
         for (table, key, line, expect) in cases {
             let text = replace_line(src, table, key, line);
-            let err = ParamSet::from_toml_str(&text, "test.toml").unwrap_err().to_string();
-            assert!(err.contains(expect), "error for {table}.{key} was {err:?}, wanted {expect:?}");
+            let err = ParamSet::from_toml_str(&text, "test.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(expect),
+                "error for {table}.{key} was {err:?}, wanted {expect:?}"
+            );
         }
     }
 }

@@ -53,14 +53,22 @@ pub struct PlantConfig {
 
 impl Default for PlantConfig {
     fn default() -> Self {
-        Self { dt: 1e-3, mu: 0.9, tyre_forces: true }
+        Self {
+            dt: 1e-3,
+            mu: 0.9,
+            tyre_forces: true,
+        }
     }
 }
 
 impl PlantConfig {
     pub fn validate(&self) -> Result<(), ParamError> {
         let bad = |field: &str, value: f64, reason: &'static str| {
-            Err(ParamError::Invalid { field: format!("plant.{field}"), value, reason })
+            Err(ParamError::Invalid {
+                field: format!("plant.{field}"),
+                value,
+                reason,
+            })
         };
         if !(self.dt.is_finite() && self.dt > 0.0 && self.dt <= 1e-3) {
             return bad("dt", self.dt, "must lie in (0, 1e-3] s (1 kHz or finer)");
@@ -205,8 +213,10 @@ impl Chassis {
             h_pitch,
             // Inertias about the roll / pitch axes, reduced by the coupling to the c.g.
             // motion (the c.g. acceleration is the state's, not the axis').
-            roll_inertia: p.ix_sprung + p.sprung_mass * h_roll * h_roll - ms2 * h_roll * h_roll / p.mass,
-            pitch_inertia: p.iy_sprung + p.sprung_mass * h_pitch * h_pitch - ms2 * h_pitch * h_pitch / p.mass,
+            roll_inertia: p.ix_sprung + p.sprung_mass * h_roll * h_roll
+                - ms2 * h_roll * h_roll / p.mass,
+            pitch_inertia: p.iy_sprung + p.sprung_mass * h_pitch * h_pitch
+                - ms2 * h_pitch * h_pitch / p.mass,
             k_roll: [p.roll_stiffness_front, p.roll_stiffness_rear],
             c_roll: [p.roll_damping_front, p.roll_damping_rear],
             k_pitch: p.pitch_stiffness,
@@ -527,7 +537,10 @@ impl Plant {
     pub fn chassis_pose(&self, which: Which) -> Pose2 {
         let i = which as usize;
         let b = &self.bodies[i];
-        Pose2 { p_in_world: b.pos - rotate(b.yaw, self.cg_offset(i)), yaw: b.yaw }
+        Pose2 {
+            p_in_world: b.pos - rotate(b.yaw, self.cg_offset(i)),
+            yaw: b.yaw,
+        }
     }
 
     /// Offset of the total c.g. from the chassis origin (body frame) due to roll and pitch.
@@ -543,7 +556,15 @@ impl Plant {
         let c = &self.chassis[i];
         let b = &self.bodies[i];
         let origin = b.pos + rotate(b.yaw, c.bumper_offset(b) - c.cg_offset(b));
-        Obb::vehicle_footprint(&Pose2 { p_in_world: origin, yaw: b.yaw }, c.length, c.width, c.cg_to_front)
+        Obb::vehicle_footprint(
+            &Pose2 {
+                p_in_world: origin,
+                yaw: b.yaw,
+            },
+            c.length,
+            c.width,
+            c.cg_to_front,
+        )
     }
 
     /// Velocity of the body point at world position `p` at bumper height (rigid yaw plus
@@ -598,7 +619,10 @@ impl Plant {
                     ext[i].add(-f_world, geom.point, self.bodies[i].pos);
                     let stronger = self.obstacle_contacts[i].is_none_or(|c| c.normal_force < fc.x);
                     if stronger {
-                        self.obstacle_contacts[i] = Some(ObstacleContact { obstacle: k, normal_force: fc.x });
+                        self.obstacle_contacts[i] = Some(ObstacleContact {
+                            obstacle: k,
+                            normal_force: fc.x,
+                        });
                     }
                 }
             }
@@ -614,7 +638,8 @@ impl Plant {
 
     fn vehicle_contact(&self, geom: &ContactGeometry, ext: &mut [External; 2]) -> ContactReport {
         let (bullet, target) = (&self.bodies[0], &self.bodies[1]);
-        let v_rel = self.body_point_velocity(1, geom.point) - self.body_point_velocity(0, geom.point);
+        let v_rel =
+            self.body_point_velocity(1, geom.point) - self.body_point_velocity(0, geom.point);
         let fc = self.law.force(geom, v_rel);
         let gamma = geom.gamma();
         let f_world = rotate(gamma, fc);
@@ -739,7 +764,11 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
         for w in 0..4 {
             let pos = c.wheel_pos[w];
             let v = Vec2::new(v_o.x - b.r * pos.y, v_o.y + b.r * pos.x);
-            let vw = if w < 2 { Vec2::new(cd * v.x + sd * v.y, -sd * v.x + cd * v.y) } else { v };
+            let vw = if w < 2 {
+                Vec2::new(cd * v.x + sd * v.y, -sd * v.x + cd * v.y)
+            } else {
+                v
+            };
             denom[w] = vw.x.abs().max(V_LOW);
             kappa[w] = (b.omega[w] * c.rw - vw.x) / denom[w];
             alpha[w] = tan_slip(vw.x, vw.y);
@@ -748,7 +777,11 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
         for (w, f) in forces.iter().enumerate() {
             fx_wheel[w] = f.fx;
             kx_over_v[w] = f.kx / denom[w];
-            let fb = if w < 2 { Vec2::new(cd * f.fx - sd * f.fy, sd * f.fx + cd * f.fy) } else { Vec2::new(f.fx, f.fy) };
+            let fb = if w < 2 {
+                Vec2::new(cd * f.fx - sd * f.fy, sd * f.fx + cd * f.fy)
+            } else {
+                Vec2::new(f.fx, f.fy)
+            };
             f_body += fb;
             m_z += cross(c.wheel_pos[w] - e, fb);
         }
@@ -774,7 +807,8 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
         - (c.c_roll[0] + c.c_roll[1]) * b.p
         + fc_body.y * c.h_bumper_roll)
         / c.roll_inertia;
-    let q_dot = (-c.ms * c.h_pitch * acc_body.x + c.ms * g * c.h_pitch * b.theta - c.k_pitch * b.theta
+    let q_dot = (-c.ms * c.h_pitch * acc_body.x + c.ms * g * c.h_pitch * b.theta
+        - c.k_pitch * b.theta
         - c.c_pitch * b.q
         + fc_body.x * c.h_bumper)
         / c.pitch_inertia;
@@ -794,14 +828,19 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
         let omega_free = b.omega[w] + dt * (drive - c.rw * fx_wheel[w]) / i_eff;
         let coulomb = c.brake_share[w] * b.brake + c.rolling_resistance * fz[w] * c.rw;
         let cap = dt * coulomb / i_eff;
-        b.omega[w] = if omega_free.abs() <= cap { 0.0 } else { omega_free - cap.copysign(omega_free) };
+        b.omega[w] = if omega_free.abs() <= cap {
+            0.0
+        } else {
+            omega_free - cap.copysign(omega_free)
+        };
     }
 
     // Actuators.
     let steer_target = b.cmd_steer.clamp(-c.steer_max, c.steer_max);
     let step_max = c.steer_rate_max * dt;
     b.steer += ((steer_target - b.steer) * c.steer_lag).clamp(-step_max, step_max);
-    b.torque += (b.cmd_torque.clamp(c.torque_limits.0, c.torque_limits.1) - b.torque) * c.torque_lag;
+    b.torque +=
+        (b.cmd_torque.clamp(c.torque_limits.0, c.torque_limits.1) - b.torque) * c.torque_lag;
     b.brake += (b.cmd_brake.clamp(0.0, c.brake_max) - b.brake) * c.torque_lag;
 
     b.fz = fz;

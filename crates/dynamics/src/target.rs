@@ -39,7 +39,11 @@ impl ContactInput {
     /// No contact.
     #[must_use]
     pub fn none() -> Self {
-        Self { fc: Vec2::zeros(), gamma: 0.0, point_in_body: Vec2::zeros() }
+        Self {
+            fc: Vec2::zeros(),
+            gamma: 0.0,
+            point_in_body: Vec2::zeros(),
+        }
     }
 
     /// The force `sign · f_c` in the body frame of a vehicle with heading ψ,
@@ -65,7 +69,11 @@ pub struct TargetJacobians {
 
 impl Default for TargetJacobians {
     fn default() -> Self {
-        Self { a: SMatrix::zeros(), b: SMatrix::zeros(), f: SMatrix::zeros() }
+        Self {
+            a: SMatrix::zeros(),
+            b: SMatrix::zeros(),
+            f: SMatrix::zeros(),
+        }
     }
 }
 

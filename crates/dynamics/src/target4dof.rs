@@ -26,8 +26,8 @@
 //! turn (a_y > 0) the body leans out of the turn, `φ = −m_s h a_y / (K_φ − m_s g h)`.
 
 use crate::bullet::{
-    front_lateral, front_lateral_d, rear_lateral, rear_lateral_d, rk4_jac_substeps,
-    rk4_substeps, split_columns, stable_substeps, Held,
+    front_lateral, front_lateral_d, rear_lateral, rear_lateral_d, rk4_jac_substeps, rk4_substeps,
+    split_columns, stable_substeps, Held,
 };
 use crate::params::{TyreParams, VehicleParams};
 use crate::target::{idx, ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
@@ -90,7 +90,11 @@ impl FourDofTarget {
         let front = AxleCurve::control(&p.tyre, fz_front, mu);
         let rear = AxleCurve::control(&p.tyre, fz_rear, mu);
         let m_eff = p.mass - ms_h * ms_h / ixx;
-        let substeps = stable_substeps(dt, front.cornering_stiffness() + rear.cornering_stiffness(), m_eff);
+        let substeps = stable_substeps(
+            dt,
+            front.cornering_stiffness() + rear.cornering_stiffness(),
+            m_eff,
+        );
         Self {
             mass: p.mass,
             inv_mass: 1.0 / p.mass,
@@ -160,8 +164,14 @@ impl FourDofTarget {
     /// `f(x)` with the steer and contact held in `held` and `fb_max = T_b / R_w`.
     #[inline]
     fn eval(&self, x: &TargetState, held: &Held, fb_max: f64) -> TargetState {
-        let (vx, vy, psi, r, p, phi) =
-            (x[idx::VX], x[idx::VY], x[idx::PSI], x[idx::R], x[idx::P], x[idx::PHI]);
+        let (vx, vy, psi, r, p, phi) = (
+            x[idx::VX],
+            x[idx::VY],
+            x[idx::PSI],
+            x[idx::R],
+            x[idx::P],
+            x[idx::PHI],
+        );
         let (sd, cd) = (held.sd, held.cd);
         let (sp, cp) = psi.sin_cos();
         let (t, _) = Self::brake_factor(vx);
@@ -267,7 +277,11 @@ impl FourDofTarget {
         let sfy = ffy + fr.fy + ct.f.y;
         let smz = lf * ffy - lr * fr.fy + ct.m;
         let mroll = self.roll_k * phi - self.roll_c * p + ct.f.y * self.h_contact;
-        let (ixx, ms_h, m) = (self.ixx * self.inv_det, self.ms_h * self.inv_det, self.mass * self.inv_det);
+        let (ixx, ms_h, m) = (
+            self.ixx * self.inv_det,
+            self.ms_h * self.inv_det,
+            self.mass * self.inv_det,
+        );
         let ay = (self.ixx * sfy - self.ms_h * mroll) * self.inv_det;
         let pd = (self.mass * mroll - self.ms_h * sfy) * self.inv_det;
 

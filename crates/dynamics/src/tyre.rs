@@ -39,7 +39,11 @@ pub fn slip_angle(vx: f64, vy: f64) -> f64 {
 pub fn magic_formula(x: f64, b: f64, c: f64, d: f64, e: f64) -> f64 {
     let bx = b * x;
     // E = 0 (the control models' curves) saves an arc-tangent.
-    let inner = if e == 0.0 { bx } else { bx - e * (bx - bx.atan()) };
+    let inner = if e == 0.0 {
+        bx
+    } else {
+        bx - e * (bx - bx.atan())
+    };
     d * (c * inner.atan()).sin()
 }
 
@@ -52,7 +56,10 @@ pub fn magic_formula_d(x: f64, b: f64, c: f64, d: f64, e: f64) -> (f64, f64) {
     let (inner, dinner) = if e == 0.0 {
         (bx, b)
     } else {
-        (bx - e * (bx - bx.atan()), b * (1.0 - e + e / (1.0 + bx * bx)))
+        (
+            bx - e * (bx - bx.atan()),
+            b * (1.0 - e + e / (1.0 + bx * bx)),
+        )
     };
     let phi = c * inner.atan();
     let (s, co) = phi.sin_cos();
@@ -80,7 +87,12 @@ impl AxleCurve {
         let d = mu_y * fz_axle;
         let k = 2.0 * tyre.cornering_stiffness(fz);
         let c = tyre.pcy1;
-        Self { b: k / (c * d), c, d, e: tyre.pey1 }
+        Self {
+            b: k / (c * d),
+            c,
+            d,
+            e: tyre.pey1,
+        }
     }
 
     /// The curve the control-oriented models use: [`AxleCurve::new`] with the curvature
@@ -89,7 +101,10 @@ impl AxleCurve {
     /// stiffness and the peak are unchanged.
     #[must_use]
     pub fn control(tyre: &TyreParams, fz_axle: f64, mu: f64) -> Self {
-        Self { e: 0.0, ..Self::new(tyre, fz_axle, mu) }
+        Self {
+            e: 0.0,
+            ..Self::new(tyre, fz_axle, mu)
+        }
     }
 
     /// Cornering stiffness B C D at zero slip (N/rad).
@@ -164,7 +179,11 @@ pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: 
     let gxa = (t.rcx1 * (bxa * alpha).abs().atan()).min(FRAC_PI_2).cos();
     let byk = t.rby1 / (1.0 + (t.rby2 * alpha).powi(2)).sqrt();
     let gyk = (t.rcy1 * (byk * kappa).abs().atan()).min(FRAC_PI_2).cos();
-    TyreForces { fx: fx0 * gxa * scale, fy: fy0 * gyk * scale, kx: kx * scale }
+    TyreForces {
+        fx: fx0 * gxa * scale,
+        fy: fy0 * gyk * scale,
+        kx: kx * scale,
+    }
 }
 
 /// `exp(x)` by its Taylor series for |x| ≤ 0.5 (relative error < 1e-13), libm beyond: the
@@ -197,7 +216,13 @@ fn exp_small(x: f64) -> f64 {
 /// [`combined_slip`] for the four tyres of a vehicle at once (written as a branch-free loop
 /// over lanes so that the compiler can evaluate tyres side by side).
 #[must_use]
-pub fn combined_slip4(t: &TyreParams, mu_scale: f64, fz: &[f64; 4], kappa: &[f64; 4], alpha: &[f64; 4]) -> [TyreForces; 4] {
+pub fn combined_slip4(
+    t: &TyreParams,
+    mu_scale: f64,
+    fz: &[f64; 4],
+    kappa: &[f64; 4],
+    alpha: &[f64; 4],
+) -> [TyreForces; 4] {
     let mut out = [TyreForces::default(); 4];
     for i in 0..4 {
         out[i] = combined_slip(t, mu_scale, fz[i], kappa[i], alpha[i]);
@@ -220,7 +245,10 @@ mod tests {
         // Initial slope B C D.
         let h = 1e-7;
         let slope = (magic_formula(h, b, c, d, e) - magic_formula(-h, b, c, d, e)) / (2.0 * h);
-        assert!((slope - b * c * d).abs() / (b * c * d) < 1e-6, "slope {slope}");
+        assert!(
+            (slope - b * c * d).abs() / (b * c * d) < 1e-6,
+            "slope {slope}"
+        );
         // The peak value is D (scan fine).
         let peak = (0..200_000)
             .map(|i| magic_formula(f64::from(i) * 1e-5, b, c, d, e))
@@ -235,9 +263,13 @@ mod tests {
         let (b, c, d, e) = (8.0, 1.6, 3000.0, 0.46);
         for &x in &[-0.8, -0.2, -0.01, 0.0, 0.03, 0.15, 0.6] {
             let h = 1e-6;
-            let fd = (magic_formula(x + h, b, c, d, e) - magic_formula(x - h, b, c, d, e)) / (2.0 * h);
+            let fd =
+                (magic_formula(x + h, b, c, d, e) - magic_formula(x - h, b, c, d, e)) / (2.0 * h);
             let (_, an) = magic_formula_d(x, b, c, d, e);
-            assert!((fd - an).abs() <= 1e-5 * an.abs().max(1.0), "x={x} fd={fd} an={an}");
+            assert!(
+                (fd - an).abs() <= 1e-5 * an.abs().max(1.0),
+                "x={x} fd={fd} an={an}"
+            );
         }
     }
 
@@ -260,8 +292,14 @@ mod tests {
         let slope = -(f(h) - f(-h)) / (2.0 * h);
         let ky = t.cornering_stiffness(fz);
         assert!((slope - ky).abs() / ky < 1e-6);
-        let peak = (0..20_000).map(|i| -f(f64::from(i) * 5e-5)).fold(f64::MIN, f64::max);
-        assert!((peak - mu * fz).abs() / (mu * fz) < 1e-6, "peak {peak} vs {}", mu * fz);
+        let peak = (0..20_000)
+            .map(|i| -f(f64::from(i) * 5e-5))
+            .fold(f64::MIN, f64::max);
+        assert!(
+            (peak - mu * fz).abs() / (mu * fz) < 1e-6,
+            "peak {peak} vs {}",
+            mu * fz
+        );
         // Longitudinal: initial slope equals K_x = p_kx1 F_z at nominal load.
         let g = |k: f64| combined_slip(&t, t.mu_scale(mu), fz, k, 0.0).fx;
         let kslope = (g(h) - g(-h)) / (2.0 * h);
@@ -274,7 +312,10 @@ mod tests {
         let s = t.mu_scale(1.0);
         let f1 = -combined_slip(&t, s, t.fz0, 0.0, 0.3).fy / t.fz0;
         let f2 = -combined_slip(&t, s, 2.0 * t.fz0, 0.0, 0.3).fy / (2.0 * t.fz0);
-        assert!(f2 < f1, "friction per unit load must fall with load: {f1} {f2}");
+        assert!(
+            f2 < f1,
+            "friction per unit load must fall with load: {f1} {f2}"
+        );
     }
 
     #[test]
@@ -316,9 +357,15 @@ mod tests {
         let full = AxleCurve::new(&t, 2.0 * t.fz0, 0.8);
         let ctrl = AxleCurve::control(&t, 2.0 * t.fz0, 0.8);
         assert_eq!(full.cornering_stiffness(), ctrl.cornering_stiffness());
-        let peak = |c: &AxleCurve| (0..20_000).map(|i| -c.force(f64::from(i) * 5e-5)).fold(f64::MIN, f64::max);
+        let peak = |c: &AxleCurve| {
+            (0..20_000)
+                .map(|i| -c.force(f64::from(i) * 5e-5))
+                .fold(f64::MIN, f64::max)
+        };
         assert!((peak(&full) - peak(&ctrl)).abs() < 1e-6 * full.d);
-        let worst = (0..2000).map(|i| (full.force(f64::from(i) * 1e-3) - ctrl.force(f64::from(i) * 1e-3)).abs()).fold(0.0, f64::max);
+        let worst = (0..2000)
+            .map(|i| (full.force(f64::from(i) * 1e-3) - ctrl.force(f64::from(i) * 1e-3)).abs())
+            .fold(0.0, f64::max);
         assert!(worst < 0.01 * full.d, "E = 0 moves the curve by {worst} N");
         // The derivative's E = 0 path agrees with finite differences too.
         for x in [-0.3, 0.0, 0.02, 0.2] {

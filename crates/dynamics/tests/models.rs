@@ -48,7 +48,10 @@ const SAMPLES: usize = 60;
 const JAC_TOL: f64 = 1e-5;
 
 fn sets() -> Vec<(&'static str, ParamSet)> {
-    ParamSet::BUILTIN.iter().map(|&n| (n, ParamSet::builtin(n).unwrap())).collect()
+    ParamSet::BUILTIN
+        .iter()
+        .map(|&n| (n, ParamSet::builtin(n).unwrap()))
+        .collect()
 }
 
 // ------------------------------------------------------------------------------------------
@@ -84,7 +87,12 @@ fn worst_column<const N: usize, const M: usize>(
 ) -> (usize, f64) {
     const FLOOR: f64 = 1e-12;
     (0..M)
-        .map(|j| (j, (an.column(j) - fd.column(j)).norm() / fd.column(j).norm().max(FLOOR)))
+        .map(|j| {
+            (
+                j,
+                (an.column(j) - fd.column(j)).norm() / fd.column(j).norm().max(FLOOR),
+            )
+        })
         .fold((0, 0.0), |best, c| if c.1 > best.1 { c } else { best })
 }
 
@@ -95,9 +103,18 @@ fn uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
 /// A random contact: zero force (but a random γ and point, so that ∂x⁺/∂f_c is still
 /// exercised) or `F_n ∈ (0, 2e4]` N with `|F_t| ≤ 0.4 F_n`; the point on the side of the
 /// given body-x interval, left or right.
-fn random_contact(rng: &mut ChaCha8Rng, zero: bool, x_range: (f64, f64), half_width: f64) -> ContactInput {
+fn random_contact(
+    rng: &mut ChaCha8Rng,
+    zero: bool,
+    x_range: (f64, f64),
+    half_width: f64,
+) -> ContactInput {
     let fn_ = if zero { 0.0 } else { uniform(rng, 1.0, 2e4) };
-    let ft = if zero { 0.0 } else { uniform(rng, -0.4, 0.4) * fn_ };
+    let ft = if zero {
+        0.0
+    } else {
+        uniform(rng, -0.4, 0.4) * fn_
+    };
     let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
     ContactInput {
         fc: Vec2::new(fn_, ft),
@@ -158,10 +175,14 @@ fn check_bullet_jacobians(substeps: usize, samples: usize) {
             z.fixed_rows_mut::<6>(0).copy_from(&xs);
             z.fixed_rows_mut::<2>(6).copy_from(&u);
             z.fixed_rows_mut::<2>(8).copy_from(&c.fc);
-            let scale = SVector::<f64, 10>::from([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 100.0, 1e3, 1e3]);
+            let scale =
+                SVector::<f64, 10>::from([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 100.0, 1e3, 1e3]);
             let fd = central_diff(
                 |z: &SVector<f64, 10>| {
-                    let cz = ContactInput { fc: Vec2::new(z[8], z[9]), ..c };
+                    let cz = ContactInput {
+                        fc: Vec2::new(z[8], z[9]),
+                        ..c
+                    };
                     model.step(
                         &z.fixed_rows::<6>(0).into_owned(),
                         &BulletInput::new(z[6], z[7]),
@@ -184,7 +205,9 @@ fn check_bullet_jacobians(substeps: usize, samples: usize) {
                     "bullet {name} #{k}: {what} column {col} relative error {err:.3e}\n\
                      x = {xs}\nu = {u}\nc = {c:?}\nA = {}\nA_fd = {fd_a}\nB = {}\nB_fd = {fd_b}\n\
                      F = {}\nF_fd = {fd_f}",
-                    jac.a, jac.b, jac.f
+                    jac.a,
+                    jac.b,
+                    jac.f
                 );
                 worst = worst.max(err);
             }
@@ -235,7 +258,10 @@ fn check_target_jacobians(substeps: usize, samples: usize) {
             let mut stepper = model.clone();
             let fd = central_diff(
                 |z: &SVector<f64, 12>| {
-                    let cz = ContactInput { fc: Vec2::new(z[10], z[11]), ..c };
+                    let cz = ContactInput {
+                        fc: Vec2::new(z[10], z[11]),
+                        ..c
+                    };
                     stepper.step(
                         &z.fixed_rows::<8>(0).into_owned(),
                         &TargetInput::new(z[8], z[9]),
@@ -258,7 +284,9 @@ fn check_target_jacobians(substeps: usize, samples: usize) {
                     "4dof {name} #{k}: {what} column {col} relative error {err:.3e}\n\
                      x = {xs}\nu = {u}\nc = {c:?}\nA = {}\nA_fd = {fd_a}\nB = {}\nB_fd = {fd_b}\n\
                      F = {}\nF_fd = {fd_f}",
-                    jac.a, jac.b, jac.f
+                    jac.a,
+                    jac.b,
+                    jac.f
                 );
                 worst = worst.max(err);
             }
@@ -291,7 +319,12 @@ fn jacobians_stay_exact_with_substeps() {
 
 /// Drive the bullet with constant steer `delta` and a speed-holding drive torque
 /// (proportional feedback on v_x) until the motion is steady; returns the final state.
-fn bullet_steady_turn(model: &BulletModel, p: &VehicleParams, speed: f64, delta: f64) -> BulletState {
+fn bullet_steady_turn(
+    model: &BulletModel,
+    p: &VehicleParams,
+    speed: f64,
+    delta: f64,
+) -> BulletState {
     let mut x = BulletState::new(0.0, 0.0, 0.0, speed, 0.0, 0.0);
     let gain = p.drive_force_gain();
     let mut last_r = f64::NAN;
@@ -302,7 +335,12 @@ fn bullet_steady_turn(model: &BulletModel, p: &VehicleParams, speed: f64, delta:
         last_r = x[5];
         x = model.step(&x, &u, &ContactInput::none());
     }
-    assert!((x[5] - last_r).abs() < 1e-12, "the turn did not settle: r {} → {}", last_r, x[5]);
+    assert!(
+        (x[5] - last_r).abs() < 1e-12,
+        "the turn did not settle: r {} → {}",
+        last_r,
+        x[5]
+    );
     x
 }
 
@@ -315,7 +353,10 @@ fn bullet_steady_cornering_matches_understeer_gradient() {
         let model = BulletModel::new(p, MU, DT);
         let k_us = model.understeer_gradient();
         let l = p.wheelbase();
-        assert!(k_us > 1e-4, "{name}: the bullet understeers (K_us = {k_us:.3e})");
+        assert!(
+            k_us > 1e-4,
+            "{name}: the bullet understeers (K_us = {k_us:.3e})"
+        );
         for speed in speeds {
             // Open-loop steer for a_y = 1 m/s² from the linear theory.
             let delta = l / (speed * speed) + k_us;
@@ -350,8 +391,14 @@ fn bullet_drive_torque_accelerates_straight() {
         let xn = model.step(&x, &u, &ContactInput::none());
         let expected = p.drive_efficiency * p.gear_ratio * u[1] / p.wheel_radius / p.mass;
         let measured = (xn[3] - x[3]) / DT;
-        assert!((measured - expected).abs() < 1e-9 * expected, "{name}: {measured} vs {expected}");
-        assert!(xn[4].abs() < 1e-12 && xn[5].abs() < 1e-12, "{name}: straight run turned");
+        assert!(
+            (measured - expected).abs() < 1e-9 * expected,
+            "{name}: {measured} vs {expected}"
+        );
+        assert!(
+            xn[4].abs() < 1e-12 && xn[5].abs() < 1e-12,
+            "{name}: straight run turned"
+        );
         // The heading is kept and the path follows it.
         let moved = (xn[1] - x[1]).atan2(xn[0] - x[0]);
         assert!((moved - 0.4).abs() < 1e-12, "{name}: moved along {moved}");
@@ -377,8 +424,14 @@ fn lower_adhesion_caps_the_lateral_force() {
         let f = lateral(&model);
         let fresh = lateral(&BulletModel::new(p, mu, DT));
         assert_eq!(f, fresh, "set_mu({mu}) differs from new(.., {mu}, ..)");
-        assert!(f.abs() < high.abs(), "μ = {mu}: |F_y| = {f} not below the μ = 1 value {high}");
-        assert!(f.abs() <= mu * p.mass * GRAVITY, "μ = {mu}: |F_y| = {f} beyond μ m g");
+        assert!(
+            f.abs() < high.abs(),
+            "μ = {mu}: |F_y| = {f} not below the μ = 1 value {high}"
+        );
+        assert!(
+            f.abs() <= mu * p.mass * GRAVITY,
+            "μ = {mu}: |F_y| = {f} beyond μ m g"
+        );
     }
 }
 
@@ -415,7 +468,11 @@ fn rear_quarter_push_yaws_the_target_with_the_moment() {
             // Contact on the side facing the bullet; the normal points into the target.
             let point = Vec2::new(-rear + 0.2, -side * 0.5 * p.width);
             let gamma = psi + side * 0.5 * PI;
-            let c = ContactInput { fc: Vec2::new(f_n, 0.0), gamma, point_in_body: point };
+            let c = ContactInput {
+                fc: Vec2::new(f_n, 0.0),
+                gamma,
+                point_in_body: point,
+            };
             let moment = point.x * side * f_n; // (p × f)_z with f = (0, side·F_n)
             assert!(moment * side < 0.0);
             let d_c = model.derivative(&x0, &u, &c);
@@ -437,7 +494,10 @@ fn rear_quarter_push_yaws_the_target_with_the_moment() {
                 "{name}: yaw rate change {dr} after 0.2 s does not follow M_z = {moment}"
             );
             // The push also moves the c.g. toward the side it comes from.
-            assert!((xc[idx::VY] - xf[idx::VY]) * side > 0.0, "{name}: lateral velocity sign");
+            assert!(
+                (xc[idx::VY] - xf[idx::VY]) * side > 0.0,
+                "{name}: lateral velocity sign"
+            );
         }
     }
 }
@@ -461,9 +521,15 @@ fn steady_turn_roll_matches_the_roll_gradient() {
         let d = model.derivative(&x, &u, &ContactInput::none());
         let a_y = d[idx::VY] + x[idx::VX] * x[idx::R];
         let expected = gradient * a_y;
-        eprintln!("{name}: a_y = {a_y:.3} m/s², φ = {:.5} rad, expected {expected:.5}", x[idx::PHI]);
+        eprintln!(
+            "{name}: a_y = {a_y:.3} m/s², φ = {:.5} rad, expected {expected:.5}",
+            x[idx::PHI]
+        );
         assert!(a_y > 2.0, "{name}: not a real turn (a_y = {a_y})");
-        assert!(x[idx::PHI] < 0.0, "{name}: the body must lean out of a left turn");
+        assert!(
+            x[idx::PHI] < 0.0,
+            "{name}: the body must lean out of a left turn"
+        );
         assert!(
             (x[idx::PHI] - expected).abs() < 0.01 * expected.abs(),
             "{name}: φ = {} vs m_s h a_y / (K_φ − m_s g h) = {expected}",
@@ -486,13 +552,24 @@ fn braking_decelerates_at_brake_torque_over_mass_and_radius() {
             x = model.step(&x, &u, &ContactInput::none());
         }
         let decel = (20.0 - x[idx::VX]) / (steps as f64 * DT);
-        assert!((decel - expected).abs() < 1e-3 * expected, "{name}: {decel} vs {expected}");
+        assert!(
+            (decel - expected).abs() < 1e-3 * expected,
+            "{name}: {decel} vs {expected}"
+        );
         // Keep braking: the car comes to rest and does not reverse; it stays on its line.
         for _ in 0..(20.0 / DT) as usize {
             x = model.step(&x, &u, &ContactInput::none());
-            assert!(x[idx::VX] >= 0.0, "{name}: braking reversed the car: vx = {}", x[idx::VX]);
+            assert!(
+                x[idx::VX] >= 0.0,
+                "{name}: braking reversed the car: vx = {}",
+                x[idx::VX]
+            );
         }
-        assert!(x[idx::VX] < 0.05, "{name}: still moving at {} m/s", x[idx::VX]);
+        assert!(
+            x[idx::VX] < 0.05,
+            "{name}: still moving at {} m/s",
+            x[idx::VX]
+        );
         assert!(x[idx::VY].abs() < 1e-12 && x[idx::R].abs() < 1e-12 && x[idx::PSI] == 1.0);
         assert!(((x[idx::Y]).atan2(x[idx::X]) - 1.0).abs() < 1e-12);
     }
@@ -526,13 +603,25 @@ fn straight_coasting_is_preserved() {
             x = model.step(&x, &TargetInput::zeros(), &ContactInput::none());
         }
         let t = steps as f64 * DT;
-        assert!((x[idx::VX] - v).abs() < 1e-12, "{name}: speed drifted to {}", x[idx::VX]);
+        assert!(
+            (x[idx::VX] - v).abs() < 1e-12,
+            "{name}: speed drifted to {}",
+            x[idx::VX]
+        );
         for i in [idx::VY, idx::R, idx::P, idx::PHI] {
             assert!(x[i].abs() < 1e-12, "{name}: state {i} = {}", x[i]);
         }
         assert!((x[idx::PSI] - psi).abs() < 1e-12);
-        assert!((x[idx::X] - (5.0 + v * psi.cos() * t)).abs() < 1e-9, "{name}: X = {}", x[idx::X]);
-        assert!((x[idx::Y] - (6.0 + v * psi.sin() * t)).abs() < 1e-9, "{name}: Y = {}", x[idx::Y]);
+        assert!(
+            (x[idx::X] - (5.0 + v * psi.cos() * t)).abs() < 1e-9,
+            "{name}: X = {}",
+            x[idx::X]
+        );
+        assert!(
+            (x[idx::Y] - (6.0 + v * psi.sin() * t)).abs() < 1e-9,
+            "{name}: Y = {}",
+            x[idx::Y]
+        );
     }
 }
 
@@ -555,30 +644,58 @@ fn contact_momentum_balances_between_bullet_and_target() {
         for k in 0..50 {
             let (vx, vy, psi, r, x, y) = random_planar(&mut rng);
             let xb = BulletState::new(x, y, psi, vx, vy, r);
-            let ub = BulletInput::new(uniform(&mut rng, -0.3, 0.3), uniform(&mut rng, -100.0, 300.0));
+            let ub = BulletInput::new(
+                uniform(&mut rng, -0.3, 0.3),
+                uniform(&mut rng, -100.0, 300.0),
+            );
             let (vx, vy, psi, r, x, y) = random_planar(&mut rng);
             let xt = TargetState::from([vx, vy, psi, r, 0.1, -0.02, x, y]);
             let ut = TargetInput::new(uniform(&mut rng, -0.3, 0.3), uniform(&mut rng, 0.0, 500.0));
             let fc = Vec2::new(uniform(&mut rng, 0.0, 2e4), uniform(&mut rng, -8e3, 8e3));
             let gamma = uniform(&mut rng, -PI, PI);
-            let cb = ContactInput { fc, gamma, point_in_body: Vec2::new(2.0, 0.3) };
-            let ct = ContactInput { fc, gamma, point_in_body: Vec2::new(-1.8, -0.7) };
-            let db = bullet.derivative(&xb, &ub, &cb) - bullet.derivative(&xb, &ub, &ContactInput::none());
-            let dt = target.derivative(&xt, &ut, &ct) - target.derivative(&xt, &ut, &ContactInput::none());
+            let cb = ContactInput {
+                fc,
+                gamma,
+                point_in_body: Vec2::new(2.0, 0.3),
+            };
+            let ct = ContactInput {
+                fc,
+                gamma,
+                point_in_body: Vec2::new(-1.8, -0.7),
+            };
+            let db = bullet.derivative(&xb, &ub, &cb)
+                - bullet.derivative(&xb, &ub, &ContactInput::none());
+            let dt = target.derivative(&xt, &ut, &ct)
+                - target.derivative(&xt, &ut, &ContactInput::none());
             let rot = |a: f64, v: Vec2| dynamics::geometry::rotate(a, v);
             let pb_rate = rot(xb[2], Vec2::new(db[3], db[4]) * pb.mass);
             let pt_rate = rot(
                 xt[idx::PSI],
-                Vec2::new(dt[idx::VX] * pt.mass, dt[idx::VY] * pt.mass + ms_h * dt[idx::P]),
+                Vec2::new(
+                    dt[idx::VX] * pt.mass,
+                    dt[idx::VY] * pt.mass + ms_h * dt[idx::P],
+                ),
             );
             // Each model applies exactly ContactInput::body_force with its sign.
             let (fb, mb) = cb.body_force(xb[2], -1.0);
             let (ft, mt) = ct.body_force(xt[idx::PSI], 1.0);
             let tol = 1e-9 * fc.norm();
-            assert!((Vec2::new(db[3], db[4]) * pb.mass - fb).norm() <= tol, "{name} #{k}: bullet force");
-            assert!((db[5] * pb.iz - mb).abs() <= tol * 3.0, "{name} #{k}: bullet moment");
-            assert!((dt[idx::R] * pt.iz - mt).abs() <= tol * 3.0, "{name} #{k}: target moment");
-            assert!((dt[idx::VX] * pt.mass - ft.x).abs() <= tol, "{name} #{k}: target F_x");
+            assert!(
+                (Vec2::new(db[3], db[4]) * pb.mass - fb).norm() <= tol,
+                "{name} #{k}: bullet force"
+            );
+            assert!(
+                (db[5] * pb.iz - mb).abs() <= tol * 3.0,
+                "{name} #{k}: bullet moment"
+            );
+            assert!(
+                (dt[idx::R] * pt.iz - mt).abs() <= tol * 3.0,
+                "{name} #{k}: target moment"
+            );
+            assert!(
+                (dt[idx::VX] * pt.mass - ft.x).abs() <= tol,
+                "{name} #{k}: target F_x"
+            );
             let sum = pb_rate + pt_rate;
             assert!(
                 sum.norm() <= 1e-9 * fc.norm(),
@@ -597,7 +714,10 @@ fn contact_momentum_balances_between_bullet_and_target() {
 /// Spectral radius of the rows/columns `keep` of a square matrix.
 fn spectral_radius<const N: usize>(a: &SMatrix<f64, N, N>, keep: &[usize]) -> f64 {
     let sub = nalgebra::DMatrix::from_fn(keep.len(), keep.len(), |i, j| a[(keep[i], keep[j])]);
-    sub.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max)
+    sub.complex_eigenvalues()
+        .iter()
+        .map(|z| z.norm())
+        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -624,7 +744,10 @@ fn explicit_step_is_stable_in_its_speed_range() {
                 let x = target_state(v, 0.0, 0.3, 0.0);
                 target.step_jac(&x, &TargetInput::zeros(), &ContactInput::none(), &mut j);
                 let rho = spectral_radius(&j.a, &TARGET_DYN);
-                assert!(rho <= 1.0 + 1e-9, "{name}: 4dof, {n} sub-steps, {v} m/s: ρ(A) = {rho}");
+                assert!(
+                    rho <= 1.0 + 1e-9,
+                    "{name}: 4dof, {n} sub-steps, {v} m/s: ρ(A) = {rho}"
+                );
             }
             let bullet = BulletModel::new(&set.bullet, MU, DT).with_substeps(n);
             for &v in bullet_speeds {
@@ -632,28 +755,50 @@ fn explicit_step_is_stable_in_its_speed_range() {
                 let x = BulletState::new(0.0, 0.0, 0.3, v, 0.0, 0.0);
                 bullet.step_jac(&x, &BulletInput::zeros(), &ContactInput::none(), &mut j);
                 let rho = spectral_radius(&j.a, &BULLET_DYN);
-                assert!(rho <= 1.0 + 1e-9, "{name}: bullet, {n} sub-steps, {v} m/s: ρ(A) = {rho}");
+                assert!(
+                    rho <= 1.0 + 1e-9,
+                    "{name}: bullet, {n} sub-steps, {v} m/s: ρ(A) = {rho}"
+                );
             }
         }
         // And below the range a single step does go unstable (so the ranges above are the
         // real limits, not loose bounds).
         let mut target = FourDofTarget::new(&set.target, MU, DT).with_substeps(1);
         let mut j = TargetJacobians::default();
-        target.step_jac(&target_state(7.0, 0.0, 0.0, 0.0), &TargetInput::zeros(), &ContactInput::none(), &mut j);
-        assert!(spectral_radius(&j.a, &TARGET_DYN) > 1.5, "{name}: 4dof single step stable at 7 m/s?");
+        target.step_jac(
+            &target_state(7.0, 0.0, 0.0, 0.0),
+            &TargetInput::zeros(),
+            &ContactInput::none(),
+            &mut j,
+        );
+        assert!(
+            spectral_radius(&j.a, &TARGET_DYN) > 1.5,
+            "{name}: 4dof single step stable at 7 m/s?"
+        );
         // The default sub-stepping is stable down to STABLE_DOWN_TO.
         let mut target = FourDofTarget::new(&set.target, MU, DT);
         let bullet = BulletModel::new(&set.bullet, MU, DT);
         for v in [dynamics::bullet::STABLE_DOWN_TO, 2.0, 5.0, 30.0] {
             let mut j = TargetJacobians::default();
-            target.step_jac(&target_state(v, 0.0, 0.3, 0.0), &TargetInput::zeros(), &ContactInput::none(), &mut j);
+            target.step_jac(
+                &target_state(v, 0.0, 0.3, 0.0),
+                &TargetInput::zeros(),
+                &ContactInput::none(),
+                &mut j,
+            );
             let rho = spectral_radius(&j.a, &TARGET_DYN);
-            assert!(rho <= 1.0 + 1e-9, "{name}: default 4dof at {v} m/s: ρ(A) = {rho}");
+            assert!(
+                rho <= 1.0 + 1e-9,
+                "{name}: default 4dof at {v} m/s: ρ(A) = {rho}"
+            );
             let mut jb = BulletJacobians::default();
             let xb = BulletState::new(0.0, 0.0, 0.3, v, 0.0, 0.0);
             bullet.step_jac(&xb, &BulletInput::zeros(), &ContactInput::none(), &mut jb);
             let rho = spectral_radius(&jb.a, &BULLET_DYN);
-            assert!(rho <= 1.0 + 1e-9, "{name}: default bullet at {v} m/s: ρ(A) = {rho}");
+            assert!(
+                rho <= 1.0 + 1e-9,
+                "{name}: default bullet at {v} m/s: ρ(A) = {rho}"
+            );
         }
     }
 }
@@ -687,6 +832,11 @@ fn stepping_does_not_allocate() {
         }
         let after = allocations();
         assert!(sink.is_finite());
-        assert_eq!(after - before, 0, "{n} sub-steps: the models allocated {} times", after - before);
+        assert_eq!(
+            after - before,
+            0,
+            "{n} sub-steps: the models allocated {} times",
+            after - before
+        );
     }
 }

@@ -15,17 +15,32 @@ fn plant(config: PlantConfig) -> Plant {
 
 /// The bullet's front-left corner angled into the target's right rear quarter.
 fn pit_start(p: &mut Plant, target_speed: f64, dv: f64) {
-    let target = VehicleInit { x: 0.0, y: 0.0, yaw: 0.0, vx: target_speed, ..Default::default() };
+    let target = VehicleInit {
+        x: 0.0,
+        y: 0.0,
+        yaw: 0.0,
+        vx: target_speed,
+        ..Default::default()
+    };
     // Bullet behind and to the right, heading 20° towards the target; front-left corner just
     // short of the target's right rear quarter.
     let yaw = 20f64.to_radians();
-    let bullet = VehicleInit { x: -3.9, y: -2.4, yaw, vx: target_speed + dv, ..Default::default() };
+    let bullet = VehicleInit {
+        x: -3.9,
+        y: -2.4,
+        yaw,
+        vx: target_speed + dv,
+        ..Default::default()
+    };
     p.reset(&bullet, &target);
 }
 
 #[test]
 fn momentum_is_conserved_through_contact_with_tyres_off() {
-    let mut p = plant(PlantConfig { tyre_forces: false, ..PlantConfig::default() });
+    let mut p = plant(PlantConfig {
+        tyre_forces: false,
+        ..PlantConfig::default()
+    });
     pit_start(&mut p, 15.0, 4.0);
     let m0 = p.total_momentum();
     let l0 = p.total_angular_momentum();
@@ -36,14 +51,21 @@ fn momentum_is_conserved_through_contact_with_tyres_off() {
             touched += 1;
         }
     }
-    assert!(touched > 20, "the vehicles must actually touch ({touched} steps)");
+    assert!(
+        touched > 20,
+        "the vehicles must actually touch ({touched} steps)"
+    );
     let m1 = p.total_momentum();
     let rel = (m1 - m0).norm() / m0.norm();
     assert!(rel <= 1e-6, "linear momentum drift {rel:e}");
     let l1 = p.total_angular_momentum();
     // Angular momentum about the origin, relative to the scale m |r| |v|.
     let scale = p.mass(Which::Bullet) * 30.0 * 19.0;
-    assert!((l1 - l0).abs() / scale <= 1e-6, "angular momentum drift {}", (l1 - l0).abs() / scale);
+    assert!(
+        (l1 - l0).abs() / scale <= 1e-6,
+        "angular momentum drift {}",
+        (l1 - l0).abs() / scale
+    );
 }
 
 #[test]
@@ -54,7 +76,14 @@ fn contact_dissipates_and_elastic_contact_nearly_conserves_energy() {
         set.contact.friction = friction;
         // Bumper at the roll axis height and pitch centre so the contact does not pump
         // energy into the suspension (the test is about the contact law).
-        let mut p = Plant::new(&set, PlantConfig { tyre_forces: false, ..PlantConfig::default() }).unwrap();
+        let mut p = Plant::new(
+            &set,
+            PlantConfig {
+                tyre_forces: false,
+                ..PlantConfig::default()
+            },
+        )
+        .unwrap();
         pit_start(&mut p, 15.0, 4.0);
         let e0 = p.planar_kinetic_energy();
         let mut touched = false;
@@ -67,11 +96,20 @@ fn contact_dissipates_and_elastic_contact_nearly_conserves_energy() {
         let e1 = p.planar_kinetic_energy();
         let rel = (e1 - e0) / e0;
         if expect_loss {
-            assert!(rel < -1e-4, "damped, frictional contact must dissipate: {rel:e}");
+            assert!(
+                rel < -1e-4,
+                "damped, frictional contact must dissipate: {rel:e}"
+            );
         } else {
             // No damping and no friction: only the suspension (which is damped) takes energy.
-            assert!(rel <= 1e-6, "elastic contact must not create energy: {rel:e}");
-            assert!(rel > -0.02, "elastic contact must nearly conserve energy: {rel:e}");
+            assert!(
+                rel <= 1e-6,
+                "elastic contact must not create energy: {rel:e}"
+            );
+            assert!(
+                rel > -0.02,
+                "elastic contact must nearly conserve energy: {rel:e}"
+            );
         }
     }
 }
@@ -98,13 +136,20 @@ fn contact_forces_are_equal_and_opposite_and_push_apart() {
     // bullet here, so the normal has a positive Y component.
     assert!(c.gamma.sin() > 0.0, "gamma {}", c.gamma);
     // The contact point lies on the target's right rear quarter.
-    assert!(c.point_in_target.x < 0.0 && c.point_in_target.y < 0.0, "{:?}", c.point_in_target);
+    assert!(
+        c.point_in_target.x < 0.0 && c.point_in_target.y < 0.0,
+        "{:?}",
+        c.point_in_target
+    );
     assert!(max_fn > 1e3, "a PIT push gives kN forces: {max_fn}");
 }
 
 #[test]
 fn rear_quarter_push_spins_the_target() {
-    let mut p = plant(PlantConfig { mu: 0.9, ..PlantConfig::default() });
+    let mut p = plant(PlantConfig {
+        mu: 0.9,
+        ..PlantConfig::default()
+    });
     pit_start(&mut p, 15.0, 4.0);
     // Keep pushing: steer a little into the target and hold drive torque.
     for _ in 0..1500 {
@@ -120,7 +165,10 @@ fn rear_quarter_push_spins_the_target() {
 fn at_rest_stays_at_rest() {
     let mut p = plant(PlantConfig::default());
     let init = VehicleInit::default();
-    let far = VehicleInit { x: -50.0, ..Default::default() };
+    let far = VehicleInit {
+        x: -50.0,
+        ..Default::default()
+    };
     p.reset(&far, &init);
     p.advance(5.0);
     for s in [p.bullet_state(), p.bullet_state()] {
@@ -136,8 +184,16 @@ fn coasting_decelerates_by_rolling_resistance_and_drag() {
     let mut p = plant(PlantConfig::default());
     let v0 = 20.0;
     p.reset(
-        &VehicleInit { x: -100.0, vx: v0, ..Default::default() },
-        &VehicleInit { x: 100.0, vx: v0, ..Default::default() },
+        &VehicleInit {
+            x: -100.0,
+            vx: v0,
+            ..Default::default()
+        },
+        &VehicleInit {
+            x: 100.0,
+            vx: v0,
+            ..Default::default()
+        },
     );
     p.advance(2.0);
     let v = p.target_state()[0];
@@ -145,7 +201,10 @@ fn coasting_decelerates_by_rolling_resistance_and_drag() {
     let f = veh.rolling_resistance * veh.mass * GRAVITY + 0.5 * 1.204 * veh.drag_area * v0 * v0;
     let expect = f / veh.mass * 2.0;
     let got = v0 - v;
-    assert!((got - expect).abs() < 0.25 * expect, "speed loss {got} vs {expect}");
+    assert!(
+        (got - expect).abs() < 0.25 * expect,
+        "speed loss {got} vs {expect}"
+    );
     // Straight: no lateral drift, no yaw.
     let t = p.target_state();
     assert!(t[1].abs() < 1e-9 && t[2].abs() < 1e-9 && t[7].abs() < 1e-9);
@@ -154,11 +213,21 @@ fn coasting_decelerates_by_rolling_resistance_and_drag() {
 #[test]
 fn full_braking_stops_the_car_and_holds_it() {
     for mu in [0.9, 0.3] {
-        let mut p = plant(PlantConfig { mu, ..PlantConfig::default() });
+        let mut p = plant(PlantConfig {
+            mu,
+            ..PlantConfig::default()
+        });
         let v0 = 20.0;
         p.reset(
-            &VehicleInit { x: -100.0, ..Default::default() },
-            &VehicleInit { x: 0.0, vx: v0, ..Default::default() },
+            &VehicleInit {
+                x: -100.0,
+                ..Default::default()
+            },
+            &VehicleInit {
+                x: 0.0,
+                vx: v0,
+                ..Default::default()
+            },
         );
         p.set_target_command(0.0, 1e5);
         p.advance(15.0);
@@ -167,7 +236,10 @@ fn full_braking_stops_the_car_and_holds_it() {
         let dist = t[6];
         let ideal = v0 * v0 / (2.0 * mu * GRAVITY);
         // Locked wheels slide with less than peak friction; load sensitivity helps a bit.
-        assert!(dist > 0.9 * ideal && dist < 1.8 * ideal, "mu {mu}: {dist} m vs ideal {ideal} m");
+        assert!(
+            dist > 0.9 * ideal && dist < 1.8 * ideal,
+            "mu {mu}: {dist} m vs ideal {ideal} m"
+        );
         let x = t[6];
         p.advance(2.0);
         assert!((p.target_state()[6] - x).abs() < 1e-3, "holds still");
@@ -178,24 +250,47 @@ fn full_braking_stops_the_car_and_holds_it() {
 fn steady_left_turn_rolls_outward_and_loads_the_outer_wheels() {
     let mut p = plant(PlantConfig::default());
     p.reset(
-        &VehicleInit { x: -100.0, y: -100.0, ..Default::default() },
-        &VehicleInit { vx: 15.0, ..Default::default() },
+        &VehicleInit {
+            x: -100.0,
+            y: -100.0,
+            ..Default::default()
+        },
+        &VehicleInit {
+            vx: 15.0,
+            ..Default::default()
+        },
     );
     p.set_target_command(0.03, 0.0);
     p.advance(6.0);
     let b = p.body(Which::Target);
     let ay = b.acc_body.y;
     assert!(ay > 1.0, "left turn: lateral acceleration {ay}");
-    assert!(b.phi < 0.0, "rolls outward (c.g. to the right): φ = {}", b.phi);
-    assert!(b.fz[1] > b.fz[0] && b.fz[3] > b.fz[2], "outer (right) wheels carry more: {:?}", b.fz);
+    assert!(
+        b.phi < 0.0,
+        "rolls outward (c.g. to the right): φ = {}",
+        b.phi
+    );
+    assert!(
+        b.fz[1] > b.fz[0] && b.fz[3] > b.fz[2],
+        "outer (right) wheels carry more: {:?}",
+        b.fz
+    );
     // Roll gradient: steady roll = −m_s h a_y / (K_φ − m_s g h).
     let v = &full().target;
     let h = v.roll_arm();
     let k = v.roll_stiffness_front + v.roll_stiffness_rear;
     let phi = -v.sprung_mass * h * ay / (k - v.sprung_mass * GRAVITY * h);
-    assert!((b.phi - phi).abs() < 0.05 * phi.abs(), "roll {} vs {}", b.phi, phi);
+    assert!(
+        (b.phi - phi).abs() < 0.05 * phi.abs(),
+        "roll {} vs {}",
+        b.phi,
+        phi
+    );
     let total: f64 = b.fz.iter().sum();
-    assert!((total - v.mass * GRAVITY).abs() < 1e-6 * total, "vertical equilibrium");
+    assert!(
+        (total - v.mass * GRAVITY).abs() < 1e-6 * total,
+        "vertical equilibrium"
+    );
 }
 
 #[test]
@@ -240,7 +335,12 @@ fn contact_average_matches_impulse() {
         guard += 1;
     }
     let avg = p.take_contact_average().expect("contact in the window");
-    assert!((avg.fc.x * 0.05 - impulse).abs() < 1e-9 * impulse.max(1.0), "{} vs {}", avg.fc.x * 0.05, impulse);
+    assert!(
+        (avg.fc.x * 0.05 - impulse).abs() < 1e-9 * impulse.max(1.0),
+        "{} vs {}",
+        avg.fc.x * 0.05,
+        impulse
+    );
     assert!(avg.point_in_target.x < 0.0);
     let _ = Vec2::zeros();
 }
@@ -248,9 +348,18 @@ fn contact_average_matches_impulse() {
 #[test]
 fn bad_config_is_refused() {
     for cfg in [
-        PlantConfig { dt: 0.01, ..PlantConfig::default() },
-        PlantConfig { dt: f64::NAN, ..PlantConfig::default() },
-        PlantConfig { mu: -0.1, ..PlantConfig::default() },
+        PlantConfig {
+            dt: 0.01,
+            ..PlantConfig::default()
+        },
+        PlantConfig {
+            dt: f64::NAN,
+            ..PlantConfig::default()
+        },
+        PlantConfig {
+            mu: -0.1,
+            ..PlantConfig::default()
+        },
     ] {
         let err = Plant::new(&full(), cfg).unwrap_err().to_string();
         assert!(err.contains("plant."), "{err}");
@@ -260,10 +369,28 @@ fn bad_config_is_refused() {
 #[test]
 fn a_car_driving_into_a_parked_car_is_stopped_by_it() {
     let mut p = plant(PlantConfig::default());
-    let obstacle = dynamics::road::Obstacle { x: 20.0, y: 0.0, heading: 0.0, vx: 0.0, vy: 0.0, length: 4.5, width: 1.8 };
+    let obstacle = dynamics::road::Obstacle {
+        x: 20.0,
+        y: 0.0,
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    };
     let rear_of_obstacle = obstacle.x - 0.5 * obstacle.length;
     p.set_obstacles(vec![obstacle]);
-    p.reset(&VehicleInit { x: -60.0, y: 20.0, ..Default::default() }, &VehicleInit { vx: 10.0, ..Default::default() });
+    p.reset(
+        &VehicleInit {
+            x: -60.0,
+            y: 20.0,
+            ..Default::default()
+        },
+        &VehicleInit {
+            vx: 10.0,
+            ..Default::default()
+        },
+    );
     let front = full().target.cg_to_front;
     let mut hit = false;
     let mut max_depth: f64 = 0.0;
@@ -278,7 +405,14 @@ fn a_car_driving_into_a_parked_car_is_stopped_by_it() {
     }
     assert!(hit, "the obstacle contact is reported");
     // A 10 m/s impact into a stiff barrier crushes a few tens of centimetres at most.
-    assert!(max_depth > 0.0 && max_depth < 0.5, "penetration {max_depth} m");
-    assert!(p.target_state()[0] < 1.0, "it does not drive through: vx {}", p.target_state()[0]);
+    assert!(
+        max_depth > 0.0 && max_depth < 0.5,
+        "penetration {max_depth} m"
+    );
+    assert!(
+        p.target_state()[0] < 1.0,
+        "it does not drive through: vx {}",
+        p.target_state()[0]
+    );
     assert!(p.obstacle_contacts()[Which::Bullet as usize].is_none());
 }

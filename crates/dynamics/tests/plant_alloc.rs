@@ -32,10 +32,27 @@ fn plant_step_allocates_nothing() {
     let set = ParamSet::builtin("full_size").unwrap();
     let mut p = Plant::new(&set, PlantConfig::default()).unwrap();
     // A parked car ahead so that obstacle contact is exercised too.
-    p.set_obstacles(vec![Obstacle { x: 40.0, y: 0.0, heading: 0.0, vx: 0.0, vy: 0.0, length: 4.5, width: 1.8 }]);
+    p.set_obstacles(vec![Obstacle {
+        x: 40.0,
+        y: 0.0,
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    }]);
     p.reset(
-        &VehicleInit { x: -3.9, y: -2.4, yaw: 20f64.to_radians(), vx: 19.0, ..Default::default() },
-        &VehicleInit { vx: 15.0, ..Default::default() },
+        &VehicleInit {
+            x: -3.9,
+            y: -2.4,
+            yaw: 20f64.to_radians(),
+            vx: 19.0,
+            ..Default::default()
+        },
+        &VehicleInit {
+            vx: 15.0,
+            ..Default::default()
+        },
     );
     let before = ALLOCATIONS.with(Cell::get);
     let mut touched = (false, false);
@@ -43,8 +60,16 @@ fn plant_step_allocates_nothing() {
         if k == 3000 {
             // Second act: the target drives into the parked car.
             p.reset(
-                &VehicleInit { x: -50.0, y: 10.0, ..Default::default() },
-                &VehicleInit { x: 20.0, vx: 10.0, ..Default::default() },
+                &VehicleInit {
+                    x: -50.0,
+                    y: 10.0,
+                    ..Default::default()
+                },
+                &VehicleInit {
+                    x: 20.0,
+                    vx: 10.0,
+                    ..Default::default()
+                },
             );
         }
         p.set_bullet_command(if k < 500 { 0.08 } else { 0.0 }, 300.0);

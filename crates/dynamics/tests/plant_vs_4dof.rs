@@ -9,7 +9,10 @@ use dynamics::params::ParamSet;
 fn close_in_a_gentle_lane_change() {
     let set = ParamSet::builtin("full_size").unwrap();
     let a = lane_change(&set, 0.9, 20.0, 0.02);
-    assert!(a.peak_yaw_rate > 0.05, "the manoeuvre must actually turn: {a:?}");
+    assert!(
+        a.peak_yaw_rate > 0.05,
+        "the manoeuvre must actually turn: {a:?}"
+    );
     assert!(a.max_position_error < 0.5, "{a:?}");
     assert!(a.max_heading_error < 0.01, "{a:?}");
     assert!(a.rms_yaw_rate_error < 0.05 * a.peak_yaw_rate, "{a:?}");
@@ -21,7 +24,16 @@ fn clearly_apart_in_a_pit_push() {
     let gentle = lane_change(&set, 0.9, 20.0, 0.02);
     let push = pit_push(&set, 0.9, 15.0, 4.0);
     assert!(push.peak_sideslip > 0.5, "high slip: {push:?}");
-    assert!(push.max_position_error > 0.75 || push.max_heading_error > 0.1, "{push:?}");
-    assert!(push.max_position_error > 3.0 * gentle.max_position_error, "{push:?} vs {gentle:?}");
-    assert!(push.one_step_velocity_error > 5.0 * gentle.one_step_velocity_error, "{push:?} vs {gentle:?}");
+    assert!(
+        push.max_position_error > 0.75 || push.max_heading_error > 0.1,
+        "{push:?}"
+    );
+    assert!(
+        push.max_position_error > 3.0 * gentle.max_position_error,
+        "{push:?} vs {gentle:?}"
+    );
+    assert!(
+        push.one_step_velocity_error > 5.0 * gentle.one_step_velocity_error,
+        "{push:?} vs {gentle:?}"
+    );
 }
