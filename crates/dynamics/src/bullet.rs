@@ -14,7 +14,7 @@
 //!
 //! with `F_x,r = η_d i_g T_r / R_w`, `F_y,f = C_f(α_f)`, `α_f` the slip angle of the front
 //! wheel velocity `R(−δ)·(vx, vy + l_f r)`, `F_y,r = C_r(α_r)`, `α_r = α(vx, vy − l_r r)`
-//! ([`tyre::slip_angle`](crate::tyre::slip_angle), [`AxleCurve`] at the static axle loads),
+//! ([`tyre::tan_slip`](crate::tyre::tan_slip), [`AxleCurve`] at the static axle loads),
 //! and `(F_cx, F_cy, M_c) = −R(γ − ψ) f_c` with its moment, as
 //! [`ContactInput::body_force`]`(ψ, −1)`.
 //!
@@ -26,7 +26,7 @@
 use crate::geometry::{cross, Vec2};
 use crate::params::{TyreParams, VehicleParams};
 use crate::target::ContactInput;
-use crate::tyre::{slip_angle, AxleCurve, V_LOW};
+use crate::tyre::{tan_slip, AxleCurve, V_LOW};
 use nalgebra::{Matrix2, RowVector2, SMatrix, SVector};
 use std::ops::Range;
 
@@ -409,16 +409,16 @@ impl HeldContact {
     }
 }
 
-/// Slip angle `α = atan(v_y / sqrt(v_x² + V_LOW²))` ([`slip_angle`]) and its partials
-/// `(∂α/∂v_x, ∂α/∂v_y)`.
+/// Lateral slip `α* = tan α = v_y / sqrt(v_x² + V_LOW²)` ([`tan_slip`], the slip the
+/// Magic Formula is evaluated on, as in the plant and MF-Tyre) and its partials
+/// `(∂α*/∂v_x, ∂α*/∂v_y) = (−v_y v_x / s³, 1/s)`, `s = sqrt(v_x² + V_LOW²)`.
 #[inline]
 #[must_use]
-pub(crate) fn slip_angle_d(vx: f64, vy: f64) -> (f64, f64, f64) {
-    let s2 = vx * vx + V_LOW * V_LOW;
-    let s = s2.sqrt();
-    // dα = (s dv_y − v_y ds) / (s² + v_y²),  ds = v_x dv_x / s.
-    let inv_den = 1.0 / (s2 + vy * vy);
-    (slip_angle(vx, vy), -vy * vx / s * inv_den, s * inv_den)
+pub(crate) fn tan_slip_d(vx: f64, vy: f64) -> (f64, f64, f64) {
+    // Bit-identical to `tan_slip` so that `step_jac` returns exactly the state `step` does.
+    let q = tan_slip(vx, vy);
+    let inv_s2 = 1.0 / (vx * vx + V_LOW * V_LOW);
+    (q, -q * vx * inv_s2, inv_s2.sqrt())
 }
 
 /// Front axle lateral force (wheel frame) and its partials.
@@ -461,7 +461,7 @@ pub(crate) fn front_lateral(
     cd: f64,
 ) -> f64 {
     let (vxw, vyw) = front_wheel_velocity(lf, vx, vy, r, sd, cd);
-    curve.force(slip_angle(vxw, vyw))
+    curve.force(tan_slip(vxw, vyw))
 }
 
 /// [`front_lateral`] with its partials in `v_x, v_y, r, δ`.
@@ -477,7 +477,7 @@ pub(crate) fn front_lateral_d(
     cd: f64,
 ) -> FrontLateral {
     let (vxw, vyw) = front_wheel_velocity(lf, vx, vy, r, sd, cd);
-    let (alpha, da_dvxw, da_dvyw) = slip_angle_d(vxw, vyw);
+    let (alpha, da_dvxw, da_dvyw) = tan_slip_d(vxw, vyw);
     let (fy, dfy) = curve.force_d(alpha);
     // ∂(vxw, vyw)/∂(vx, vy, r, δ) = [[cδ, sδ, l_f sδ, vyw], [−sδ, cδ, l_f cδ, −vxw]].
     let d_vx = dfy * (da_dvxw * cd - da_dvyw * sd);
@@ -495,14 +495,14 @@ pub(crate) fn front_lateral_d(
 #[inline]
 #[must_use]
 pub(crate) fn rear_lateral(curve: &AxleCurve, lr: f64, vx: f64, vy: f64, r: f64) -> f64 {
-    curve.force(slip_angle(vx, vy - lr * r))
+    curve.force(tan_slip(vx, vy - lr * r))
 }
 
 /// [`rear_lateral`] with its partials in `v_x, v_y, r`.
 #[inline]
 #[must_use]
 pub(crate) fn rear_lateral_d(curve: &AxleCurve, lr: f64, vx: f64, vy: f64, r: f64) -> RearLateral {
-    let (alpha, da_dvx, da_dvy) = slip_angle_d(vx, vy - lr * r);
+    let (alpha, da_dvx, da_dvy) = tan_slip_d(vx, vy - lr * r);
     let (fy, dfy) = curve.force_d(alpha);
     RearLateral {
         fy,
