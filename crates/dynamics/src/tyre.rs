@@ -38,13 +38,7 @@ pub fn slip_angle(vx: f64, vy: f64) -> f64 {
 #[must_use]
 pub fn magic_formula(x: f64, b: f64, c: f64, d: f64, e: f64) -> f64 {
     let bx = b * x;
-    // E = 0 (the control models' curves) saves an arc-tangent.
-    let inner = if e == 0.0 {
-        bx
-    } else {
-        bx - e * (bx - bx.atan())
-    };
-    d * (c * inner.atan()).sin()
+    d * (c * (bx - e * (bx - bx.atan())).atan()).sin()
 }
 
 /// The Magic Formula and its derivative with respect to `x`.
@@ -114,11 +108,16 @@ impl AxleCurve {
         self.b * self.c * self.d
     }
 
-    /// Lateral force for slip angle α (our convention: `F_y = −MF(α)`).
+    /// Lateral force for slip α (our convention: `F_y = −MF(α)`).
     #[inline]
     #[must_use]
     pub fn force(&self, alpha: f64) -> f64 {
-        -magic_formula(alpha, self.b, self.c, self.d, self.e)
+        if self.e == 0.0 {
+            // The control curve: one arc-tangent less.
+            -self.d * (self.c * (self.b * alpha).atan()).sin()
+        } else {
+            -magic_formula(alpha, self.b, self.c, self.d, self.e)
+        }
     }
 
     /// Lateral force and dF_y/dα.
@@ -165,7 +164,7 @@ pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: 
     let scale = fz.max(0.0) / fz_eval;
     let dfz = (fz_eval - t.fz0) / t.fz0;
     // Pure longitudinal slip.
-    let kx = fz_eval * (t.pkx1 + t.pkx2 * dfz) * exp_small(t.pkx3 * dfz);
+    let kx = fz_eval * (t.pkx1 + t.pkx2 * dfz) * (t.pkx3 * dfz).exp();
     let dx = mu_scale * (t.pdx1 + t.pdx2 * dfz).max(0.05) * fz_eval;
     let bx = kx / (t.pcx1 * dx);
     let fx0 = magic_formula(kappa, bx, t.pcx1, dx, t.pex1);
@@ -184,33 +183,6 @@ pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: 
         fy: fy0 * gyk * scale,
         kx: kx * scale,
     }
-}
-
-/// `exp(x)` by its Taylor series for |x| ≤ 0.5 (relative error < 1e-13), libm beyond: the
-/// load-sensitivity exponent `p_Kx3 df_z` stays small.
-#[inline(always)]
-fn exp_small(x: f64) -> f64 {
-    if x.abs() > 0.5 {
-        return x.exp();
-    }
-    // Horner form of Σ_{k ≤ 13} x^k / k!.
-    const C: [f64; 14] = [
-        1.0,
-        1.0,
-        1.0 / 2.0,
-        1.0 / 6.0,
-        1.0 / 24.0,
-        1.0 / 120.0,
-        1.0 / 720.0,
-        1.0 / 5_040.0,
-        1.0 / 40_320.0,
-        1.0 / 362_880.0,
-        1.0 / 3_628_800.0,
-        1.0 / 39_916_800.0,
-        1.0 / 479_001_600.0,
-        1.0 / 6_227_020_800.0,
-    ];
-    C.iter().rev().fold(0.0, |acc, c| acc * x + c)
 }
 
 /// [`combined_slip`] for the four tyres of a vehicle at once (written as a branch-free loop
@@ -270,14 +242,6 @@ mod tests {
                 (fd - an).abs() <= 1e-5 * an.abs().max(1.0),
                 "x={x} fd={fd} an={an}"
             );
-        }
-    }
-
-    #[test]
-    fn exp_small_matches_libm() {
-        for i in -600..=600 {
-            let x = f64::from(i) * 1e-3;
-            assert!((exp_small(x) - x.exp()).abs() <= 1e-13 * x.exp(), "x = {x}");
         }
     }
 
