@@ -77,6 +77,17 @@ fn agreement(model: &mut FourDofTarget, samples: &[Sample]) -> Agreement {
     }
 }
 
+fn plant_on(params: &ParamSet, mu: f64) -> Plant {
+    Plant::new(
+        params,
+        PlantConfig {
+            mu,
+            ..PlantConfig::default()
+        },
+    )
+    .expect("valid parameters")
+}
+
 fn pos_err(a: &TargetState, b: &TargetState) -> f64 {
     ((a[idx::X] - b[idx::X]).powi(2) + (a[idx::Y] - b[idx::Y]).powi(2)).sqrt()
 }
@@ -84,14 +95,7 @@ fn pos_err(a: &TargetState, b: &TargetState) -> f64 {
 /// A gentle single lane change of the target alone: full-sine steer of `amplitude` rad over
 /// 2.5 s at `speed` m/s, speed held by a drive-torque loop in the plant, 5 s in all.
 pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Agreement {
-    let mut plant = Plant::new(
-        params,
-        PlantConfig {
-            mu,
-            ..PlantConfig::default()
-        },
-    )
-    .expect("valid parameters");
+    let mut plant = plant_on(params, mu);
     plant.reset(
         &VehicleInit {
             x: -1000.0,
@@ -143,14 +147,7 @@ pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Ag
 /// nothing. The 4-DOF model is fed the plant's contact force averaged over each 0.05 s
 /// (impulse-preserving) with its direction and point of action; 3 s in all.
 pub fn pit_push(params: &ParamSet, mu: f64, target_speed: f64, dv: f64) -> Agreement {
-    let mut plant = Plant::new(
-        params,
-        PlantConfig {
-            mu,
-            ..PlantConfig::default()
-        },
-    )
-    .expect("valid parameters");
+    let mut plant = plant_on(params, mu);
     let t = &params.target;
     let b = &params.bullet;
     let yaw = 20f64.to_radians();

@@ -229,32 +229,47 @@ impl ParamSet {
     }
 }
 
-/// Range rules for one field.
-enum Rule {
+/// Range rules for one numeric field of a user-supplied file (parameters, roads, scenarios).
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Rule {
     Positive,
     NonNegative,
     Finite,
     Fraction,
     AtMostOne,
+    /// `|value| · scale < 1` (e.g. a curvature times the road's half width).
+    AbsBelowInverse {
+        scale: f64,
+        reason: &'static str,
+    },
+}
+
+impl Rule {
+    /// Why `value` breaks the rule, or `None` when it is admissible. Non-finite values
+    /// always break it.
+    pub(crate) fn violation(self, value: f64) -> Option<&'static str> {
+        if !value.is_finite() {
+            return Some("must be finite");
+        }
+        match self {
+            Rule::Positive if value <= 0.0 => Some("must be positive"),
+            Rule::NonNegative if value < 0.0 => Some("must not be negative"),
+            Rule::Fraction if !(0.0..=1.0).contains(&value) => Some("must lie in [0, 1]"),
+            Rule::AtMostOne if value > 1.0 => Some("must be at most 1 (Magic Formula curvature)"),
+            Rule::AbsBelowInverse { scale, reason } if value.abs() * scale >= 1.0 => Some(reason),
+            _ => None,
+        }
+    }
 }
 
 fn check(prefix: &str, name: &str, value: f64, rule: Rule) -> Result<(), ParamError> {
-    let bad = |reason: &'static str| {
-        Err(ParamError::Invalid {
+    match rule.violation(value) {
+        Some(reason) => Err(ParamError::Invalid {
             field: format!("{prefix}.{name}"),
             value,
             reason,
-        })
-    };
-    if !value.is_finite() {
-        return bad("must be finite");
-    }
-    match rule {
-        Rule::Positive if value <= 0.0 => bad("must be positive"),
-        Rule::NonNegative if value < 0.0 => bad("must not be negative"),
-        Rule::Fraction if !(0.0..=1.0).contains(&value) => bad("must lie in [0, 1]"),
-        Rule::AtMostOne if value > 1.0 => bad("must be at most 1 (Magic Formula curvature)"),
-        _ => Ok(()),
+        }),
+        None => Ok(()),
     }
 }
 

@@ -37,6 +37,7 @@
 //! Evaluation, projection and edge distances allocate nothing.
 
 use crate::geometry::{cross, rotate, Obb, Pose2, Vec2};
+use crate::params::Rule;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -168,7 +169,7 @@ impl RoadSpec {
             return Err(RoadError::NoSegments);
         }
         let half_width = self.half_width();
-        let fold = Rule::NoFold { half_width };
+        let fold = no_fold(half_width);
         for (i, segment) in self.segments.iter().enumerate() {
             let field = |name: &str| format!("segments[{i}].{name}");
             check(|| field("length"), segment.length(), Rule::Positive)?;
@@ -216,33 +217,22 @@ impl RoadSpec {
     }
 }
 
-/// Range rules for one field.
-#[derive(Clone, Copy)]
-enum Rule {
-    Finite,
-    Positive,
-    NonNegative,
-    NoFold { half_width: f64 },
-}
-
 fn check(field: impl FnOnce() -> String, value: f64, rule: Rule) -> Result<(), RoadError> {
-    let bad = |reason: &'static str| {
-        Err(RoadError::Invalid {
+    match rule.violation(value) {
+        Some(reason) => Err(RoadError::Invalid {
             field: field(),
             value,
             reason,
-        })
-    };
-    if !value.is_finite() {
-        return bad("must be finite");
+        }),
+        None => Ok(()),
     }
-    match rule {
-        Rule::Positive if value <= 0.0 => bad("must be positive"),
-        Rule::NonNegative if value < 0.0 => bad("must not be negative"),
-        Rule::NoFold { half_width } if value.abs() * half_width >= 1.0 => {
-            bad("|curvature| × half_width must be below 1 (the inner road edge would fold)")
-        }
-        _ => Ok(()),
+}
+
+/// The road-specific rule: the inner edge must not fold over the reference line.
+fn no_fold(half_width: f64) -> Rule {
+    Rule::AbsBelowInverse {
+        scale: half_width,
+        reason: "|curvature| × half_width must be below 1 (the inner road edge would fold)",
     }
 }
 
