@@ -212,8 +212,11 @@ impl BulletModel {
         )
     }
 
-    /// `f(x)` and its stacked Jacobian `[∂f/∂x | ∂f/∂u | ∂f/∂f_c]` (6 × 10), written
-    /// entirely into `j`.
+    /// `f(x)` and its stacked Jacobian `[∂f/∂x | ∂f/∂u | ∂f/∂f_c]` (6 × 10) in `j`.
+    ///
+    /// Writes every structurally nonzero entry, unconditionally; the others are never
+    /// touched, so `j` must come zero-initialised (as `rk4_jac` provides it) and can then be
+    /// reused for every stage without clearing.
     #[inline]
     fn eval_jac(
         &self,
@@ -235,7 +238,6 @@ impl BulletModel {
         let fr = rear_lateral_d(&self.rear, lr, vx, vy, r);
         let ct = held.contact.terms(sp, cp);
 
-        *j = SMatrix::zeros();
         // Kinematics.
         j[(idx::X, PSI)] = -vx * sp - vy * cp;
         j[(idx::X, VX)] = cp;
@@ -579,6 +581,44 @@ fn stage_update<const N: usize, const M: usize>(
     }
 }
 
+/// `D ← J + α A D` as [`stage_update`] with `E = J` (the stage's own Jacobian, whose first N
+/// columns are `A`), fused with the RK4 accumulation `jac += w D` while each new column is
+/// still in registers; the inactive state columns (zero in every stage) are skipped.
+#[inline]
+fn stage_update_accumulate<const N: usize, const M: usize>(
+    d: &mut SMatrix<f64, N, M>,
+    alpha: f64,
+    j: &SMatrix<f64, N, M>,
+    active: Range<usize>,
+    jac: &mut SMatrix<f64, N, M>,
+    w: f64,
+) {
+    let a = &j.data.0;
+    for (col, ((dc, ec), out)) in d
+        .data
+        .0
+        .iter_mut()
+        .zip(&j.data.0)
+        .zip(jac.data.0.iter_mut())
+        .enumerate()
+    {
+        if col < N && !active.contains(&col) {
+            continue;
+        }
+        let mut acc = *ec;
+        for k in active.clone() {
+            let s = alpha * dc[k];
+            for (oi, ai) in acc.iter_mut().zip(&a[k]) {
+                *oi += ai * s;
+            }
+        }
+        for (o, v) in out.iter_mut().zip(&acc) {
+            *o += w * v;
+        }
+        *dc = acc;
+    }
+}
+
 /// `y += alpha · x` (plain loops over the column arrays, which the compiler unrolls).
 #[inline]
 fn add_scaled<const N: usize, const M: usize>(
@@ -613,7 +653,8 @@ pub(crate) fn split_columns<const N: usize, const M: usize>(
 /// Only the columns `active` of `∂f/∂x` may be nonzero (checked in debug builds).
 ///
 /// `f(x, J)` returns `ẋ` and writes the stacked continuous Jacobian
-/// `J = [∂f/∂x | ∂f/∂w]` (N × M, `w` the held inputs) into every entry of `J`. On return
+/// `J = [∂f/∂x | ∂f/∂w]` (N × M, `w` the held inputs) into `J`: every structurally nonzero
+/// entry, the same ones on every call (the matrices passed are zero-initialised once). On return
 /// `jac` holds `[∂x⁺/∂x | ∂x⁺/∂w]`. With stage Jacobians `A_i = ∂f/∂x (x_i)`,
 /// `G_i = ∂f/∂w (x_i)` and `D_i = [∂k_i/∂x | ∂k_i/∂w]`:
 ///
@@ -637,18 +678,19 @@ pub(crate) fn rk4_jac<const N: usize, const M: usize>(
     *jac = SMatrix::identity();
     add_scaled(jac, h / 6.0, &d);
     let mut j = SMatrix::<f64, N, M>::zeros();
-    let mut stage = |xs: &SVector<f64, N>, c: f64, d: &mut SMatrix<f64, N, M>| {
+    let mut stage = |xs: &SVector<f64, N>,
+                     c: f64,
+                     d: &mut SMatrix<f64, N, M>,
+                     jac: &mut SMatrix<f64, N, M>,
+                     w: f64| {
         let k = f(xs, &mut j);
-        stage_update(d, c, &j, &j, active.clone());
+        stage_update_accumulate(d, c, &j, active.clone(), jac, w);
         k
     };
-    let k2 = stage(&(x + k1 * (0.5 * h)), 0.5 * h, &mut d);
-    add_scaled(jac, h / 3.0, &d);
-    let k3 = stage(&(x + k2 * (0.5 * h)), 0.5 * h, &mut d);
-    add_scaled(jac, h / 3.0, &d);
-    let k4 = stage(&(x + k3 * h), h, &mut d);
-    add_scaled(jac, h / 6.0, &d);
-    x + (k1 + (k2 + k3) * 2.0 + k4) * (h / 6.0)
+    let k2 = stage(&(x + k1 * (0.5 * h)), 0.5 * h, &mut d, jac, h / 3.0);
+    let k3 = stage(&(x + k2 * (0.5 * h)), 0.5 * h, &mut d, jac, h / 3.0);
+    let _k4 = stage(&(x + k3 * h), h, &mut d, jac, h / 6.0);
+    x + (k1 + (k2 + k3) * 2.0 + _k4) * (h / 6.0)
 }
 
 /// `n` RK4 sub-steps covering `dt`, with the Jacobian of the whole step chained through

@@ -201,8 +201,11 @@ impl FourDofTarget {
         ])
     }
 
-    /// `f(x)` and its stacked Jacobian `[∂f/∂x | ∂f/∂u | ∂f/∂f_c]` (8 × 12), written
-    /// entirely into `j`.
+    /// `f(x)` and its stacked Jacobian `[∂f/∂x | ∂f/∂u | ∂f/∂f_c]` (8 × 12) in `j`.
+    ///
+    /// Writes every structurally nonzero entry, unconditionally; the others are never
+    /// touched, so `j` must come zero-initialised (as `rk4_jac` provides it) and can then be
+    /// reused for every stage without clearing.
     #[inline]
     fn eval_jac(
         &self,
@@ -285,7 +288,6 @@ impl FourDofTarget {
         let ay = (self.ixx * sfy - self.ms_h * mroll) * self.inv_det;
         let pd = (self.mass * mroll - self.ms_h * sfy) * self.inv_det;
 
-        *j = SMatrix::zeros();
         // Dynamics: v̇x, v̇y = a − vx r, ṙ, ṗ with (a, ṗ) from the 2 × 2 lateral/roll system.
         for col in 0..NJ {
             j[(VX, col)] = gx[col] * self.inv_mass;
