@@ -20,6 +20,7 @@
 //! * [`contact`]: separating-axis contact geometry, contact frame, force mapping,
 //!   compliant contact law.
 //! * [`road`]: roads (straight, arc, clothoid), Frenet projection, edge distances, obstacles.
+//! * `integrate` (internal): RK4 and RK4 with the exact Jacobian of the discrete step.
 //! * [`bullet`]: the bullet's single-track control model with analytic Jacobians.
 //! * [`target4dof`]: the 4-DOF analytic target model, first [`TargetModel`].
 //! * [`plant`]: the high-fidelity two-vehicle plant (the truth).
@@ -29,6 +30,7 @@ pub mod compare;
 pub mod contact;
 pub mod error;
 pub mod geometry;
+mod integrate;
 pub mod params;
 pub mod plant;
 pub mod road;

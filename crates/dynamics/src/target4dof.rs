@@ -26,9 +26,9 @@
 //! turn (a_y > 0) the body leans out of the turn, `φ = −m_s h a_y / (K_φ − m_s g h)`.
 
 use crate::bullet::{
-    front_lateral, front_lateral_d, rear_lateral, rear_lateral_d, rk4_jac_substeps, rk4_substeps,
-    split_columns, stable_substeps, Held,
+    front_lateral, front_lateral_d, rear_lateral, rear_lateral_d, stable_substeps, Held,
 };
+use crate::integrate::{rk4_jac_substeps, rk4_substeps, split_columns};
 use crate::params::{TyreParams, VehicleParams};
 use crate::target::{idx, ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
 use crate::tyre::AxleCurve;
