@@ -20,8 +20,8 @@
 //!
 //! This module also holds the pieces shared with the 4-DOF target model
 //! ([`crate::target4dof`]): slip angles with their partial derivatives, the axle lateral
-//! forces with theirs, the contact force with its derivatives in ψ and `f_c`, and RK4 with
-//! exact Jacobian propagation through the four stages.
+//! forces with theirs, and the contact force with its derivatives in ψ and `f_c`. RK4 with
+//! exact Jacobian propagation lives in `crate::integrate`.
 
 use crate::geometry::{cross, Vec2};
 use crate::integrate::{rk4_jac_substeps, rk4_substeps, split_columns};
