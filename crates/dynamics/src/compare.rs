@@ -110,8 +110,7 @@ pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Ag
     let per_sample = (DT / plant.dt()).round() as usize;
     let mut samples = Vec::new();
     let period = 2.5;
-    for k in 0..=100usize {
-        let t = k as f64 * DT;
+    for _ in 0..=100 {
         let body = plant.body(Which::Target);
         // The model is fed the plant's actual (lagged, rate-limited) steer angle.
         let u = TargetInput::new(body.steer, 0.0);
@@ -132,7 +131,6 @@ pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Ag
             plant.set_drive(Which::Target, 300.0 * (speed - vx));
             plant.step();
         }
-        let _ = t;
     }
     // Use the steer at the middle of each interval (the plant's steer moves within it).
     for k in 0..samples.len() - 1 {
@@ -143,7 +141,7 @@ pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Ag
 }
 
 /// A PIT-like rear-quarter push: the bullet, 20° into the target's right rear quarter with
-/// `dv` m/s more speed, keeps steering in and driving for `push` s; the target's driver does
+/// `dv` m/s more speed, keeps steering in and driving for 0.6 s; the target's driver does
 /// nothing. The 4-DOF model is fed the plant's contact force averaged over each 0.05 s
 /// (impulse-preserving) with its direction and point of action; 3 s in all.
 pub fn pit_push(params: &ParamSet, mu: f64, target_speed: f64, dv: f64) -> Agreement {
@@ -172,7 +170,7 @@ pub fn pit_push(params: &ParamSet, mu: f64, target_speed: f64, dv: f64) -> Agree
     let per_sample = (DT / plant.dt()).round() as usize;
     let mut samples: Vec<Sample> = Vec::new();
     let _ = plant.take_contact_average();
-    for k in 0..=60usize {
+    for _ in 0..=60 {
         let x = plant.target_state();
         for _ in 0..per_sample {
             if plant.time() < 0.6 {
@@ -190,7 +188,6 @@ pub fn pit_push(params: &ParamSet, mu: f64, target_speed: f64, dv: f64) -> Agree
                 gamma: r.gamma,
                 point_in_body: r.point_in_target,
             });
-        let _ = k;
         samples.push(Sample {
             x,
             u: TargetInput::zeros(),

@@ -1,6 +1,5 @@
 //! Physics tests of the high-fidelity plant.
 
-use dynamics::geometry::Vec2;
 use dynamics::params::ParamSet;
 use dynamics::plant::{Plant, PlantConfig, VehicleInit, Which};
 use dynamics::GRAVITY;
@@ -342,7 +341,6 @@ fn contact_average_matches_impulse() {
         impulse
     );
     assert!(avg.point_in_target.x < 0.0);
-    let _ = Vec2::zeros();
 }
 
 #[test]
