@@ -83,13 +83,43 @@ pub struct BulletModel {
     lr: f64,
     /// η_d i_g / R_w (1/m).
     drive_gain: f64,
+    axles: Axles,
+    dt: f64,
+    substeps: usize,
+}
+
+/// The two axle curves of a control model: the Magic Formula control curves at the static
+/// axle loads, rebuilt when the road μ changes. Shared by the bullet and the 4-DOF target.
+#[derive(Debug, Clone)]
+pub(crate) struct Axles {
     tyre: TyreParams,
     fz_front: f64,
     fz_rear: f64,
-    front: AxleCurve,
-    rear: AxleCurve,
-    dt: f64,
-    substeps: usize,
+    pub front: AxleCurve,
+    pub rear: AxleCurve,
+}
+
+impl Axles {
+    pub(crate) fn new(p: &VehicleParams, mu: f64) -> Self {
+        let (fz_front, fz_rear) = p.static_axle_loads();
+        Self {
+            tyre: p.tyre.clone(),
+            fz_front,
+            fz_rear,
+            front: AxleCurve::control(&p.tyre, fz_front, mu),
+            rear: AxleCurve::control(&p.tyre, fz_rear, mu),
+        }
+    }
+
+    pub(crate) fn set_mu(&mut self, mu: f64) {
+        self.front = AxleCurve::control(&self.tyre, self.fz_front, mu);
+        self.rear = AxleCurve::control(&self.tyre, self.fz_rear, mu);
+    }
+
+    /// `C_f + C_r` (N/rad), μ-independent.
+    pub(crate) fn cornering_sum(&self) -> f64 {
+        self.front.cornering_stiffness() + self.rear.cornering_stiffness()
+    }
 }
 
 /// Speed (m/s) down to which the default sub-stepping keeps the explicit step stable.
@@ -115,14 +145,8 @@ impl BulletModel {
     /// [`STABLE_DOWN_TO`]; override with [`BulletModel::with_substeps`].
     #[must_use]
     pub fn new(p: &VehicleParams, mu: f64, dt: f64) -> Self {
-        let (fz_front, fz_rear) = p.static_axle_loads();
-        let front = AxleCurve::control(&p.tyre, fz_front, mu);
-        let rear = AxleCurve::control(&p.tyre, fz_rear, mu);
-        let substeps = stable_substeps(
-            dt,
-            front.cornering_stiffness() + rear.cornering_stiffness(),
-            p.mass,
-        );
+        let axles = Axles::new(p, mu);
+        let substeps = stable_substeps(dt, axles.cornering_sum(), p.mass);
         Self {
             mass: p.mass,
             inv_mass: 1.0 / p.mass,
@@ -130,11 +154,7 @@ impl BulletModel {
             lf: p.lf,
             lr: p.lr,
             drive_gain: p.drive_force_gain(),
-            tyre: p.tyre.clone(),
-            fz_front,
-            fz_rear,
-            front,
-            rear,
+            axles,
             dt,
             substeps,
         }
@@ -154,8 +174,7 @@ impl BulletModel {
 
     /// Change the road adhesion: rebuilds both axle curves.
     pub fn set_mu(&mut self, mu: f64) {
-        self.front = AxleCurve::control(&self.tyre, self.fz_front, mu);
-        self.rear = AxleCurve::control(&self.tyre, self.fz_rear, mu);
+        self.axles.set_mu(mu);
     }
 
     /// The step length (s).
@@ -173,7 +192,7 @@ impl BulletModel {
     /// Front and rear axle lateral force curves.
     #[must_use]
     pub fn axle_curves(&self) -> (AxleCurve, AxleCurve) {
-        (self.front, self.rear)
+        (self.axles.front, self.axles.rear)
     }
 
     /// Understeer gradient `K_us = (m/L)(l_r/C_f − l_f/C_r)` (rad per m/s²), with `C_f`,
@@ -182,8 +201,8 @@ impl BulletModel {
     #[must_use]
     pub fn understeer_gradient(&self) -> f64 {
         let l = self.lf + self.lr;
-        let cf = self.front.cornering_stiffness();
-        let cr = self.rear.cornering_stiffness();
+        let cf = self.axles.front.cornering_stiffness();
+        let cr = self.axles.rear.cornering_stiffness();
         self.mass / l * (self.lr / cf - self.lf / cr)
     }
 
@@ -199,8 +218,8 @@ impl BulletModel {
         let (psi, vx, vy, r) = (x[idx::PSI], x[idx::VX], x[idx::VY], x[idx::R]);
         let (sd, cd) = (held.sd, held.cd);
         let (sp, cp) = psi.sin_cos();
-        let fyf = front_lateral(&self.front, self.lf, vx, vy, r, sd, cd);
-        let fyr = rear_lateral(&self.rear, self.lr, vx, vy, r);
+        let fyf = front_lateral(&self.axles.front, self.lf, vx, vy, r, sd, cd);
+        let fyr = rear_lateral(&self.axles.rear, self.lr, vx, vy, r);
         let (fc, mc) = held.contact.force(sp, cp);
         BulletState::new(
             vx * cp - vy * sp,
@@ -234,8 +253,8 @@ impl BulletModel {
         let (sd, cd) = (held.sd, held.cd);
         let (lf, lr, inv_m, inv_iz) = (self.lf, self.lr, self.inv_mass, self.inv_iz);
         let (sp, cp) = psi.sin_cos();
-        let ff = front_lateral_d(&self.front, lf, vx, vy, r, sd, cd);
-        let fr = rear_lateral_d(&self.rear, lr, vx, vy, r);
+        let ff = front_lateral_d(&self.axles.front, lf, vx, vy, r, sd, cd);
+        let fr = rear_lateral_d(&self.axles.rear, lr, vx, vy, r);
         let ct = held.contact.terms(sp, cp);
 
         // Kinematics.

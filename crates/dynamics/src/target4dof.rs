@@ -26,12 +26,11 @@
 //! turn (a_y > 0) the body leans out of the turn, `φ = −m_s h a_y / (K_φ − m_s g h)`.
 
 use crate::bullet::{
-    front_lateral, front_lateral_d, rear_lateral, rear_lateral_d, stable_substeps, Held,
+    front_lateral, front_lateral_d, rear_lateral, rear_lateral_d, stable_substeps, Axles, Held,
 };
 use crate::integrate::{rk4_jac_substeps, rk4_substeps, split_columns};
-use crate::params::{TyreParams, VehicleParams};
+use crate::params::VehicleParams;
 use crate::target::{idx, ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
-use crate::tyre::AxleCurve;
 use crate::GRAVITY;
 use nalgebra::SMatrix;
 
@@ -67,11 +66,7 @@ pub struct FourDofTarget {
     inv_rw: f64,
     /// Front brake share β.
     bias: f64,
-    tyre: TyreParams,
-    fz_front: f64,
-    fz_rear: f64,
-    front: AxleCurve,
-    rear: AxleCurve,
+    axles: Axles,
     dt: f64,
     substeps: usize,
 }
@@ -83,18 +78,12 @@ impl FourDofTarget {
     /// lateral mass to `m − (m_s h)²/I_xx`, which makes this model the stiffer of the two).
     #[must_use]
     pub fn new(p: &VehicleParams, mu: f64, dt: f64) -> Self {
-        let (fz_front, fz_rear) = p.static_axle_loads();
         let h = p.roll_arm();
         let ms_h = p.sprung_mass * h;
         let ixx = p.ix_sprung + p.sprung_mass * h * h;
-        let front = AxleCurve::control(&p.tyre, fz_front, mu);
-        let rear = AxleCurve::control(&p.tyre, fz_rear, mu);
+        let axles = Axles::new(p, mu);
         let m_eff = p.mass - ms_h * ms_h / ixx;
-        let substeps = stable_substeps(
-            dt,
-            front.cornering_stiffness() + rear.cornering_stiffness(),
-            m_eff,
-        );
+        let substeps = stable_substeps(dt, axles.cornering_sum(), m_eff);
         Self {
             mass: p.mass,
             inv_mass: 1.0 / p.mass,
@@ -109,11 +98,7 @@ impl FourDofTarget {
             inv_det: 1.0 / (p.mass * ixx - ms_h * ms_h),
             inv_rw: 1.0 / p.wheel_radius,
             bias: p.brake_bias_front,
-            tyre: p.tyre.clone(),
-            fz_front,
-            fz_rear,
-            front,
-            rear,
+            axles,
             dt,
             substeps,
         }
@@ -135,8 +120,7 @@ impl FourDofTarget {
 
     /// Change the road adhesion: rebuilds both axle curves.
     pub fn set_mu(&mut self, mu: f64) {
-        self.front = AxleCurve::control(&self.tyre, self.fz_front, mu);
-        self.rear = AxleCurve::control(&self.tyre, self.fz_rear, mu);
+        self.axles.set_mu(mu);
     }
 
     /// Steady-state roll gradient `dφ/da_y = −m_s h / (K_φ − m_s g h)` (rad per m/s²);
@@ -164,29 +148,32 @@ impl FourDofTarget {
     /// `f(x)` with the steer and contact held in `held` and `fb_max = T_b / R_w`.
     #[inline]
     fn eval(&self, x: &TargetState, held: &Held, fb_max: f64) -> TargetState {
-        let (vx, vy, psi, r, p, phi) = (
-            x[idx::VX],
-            x[idx::VY],
-            x[idx::PSI],
-            x[idx::R],
-            x[idx::P],
-            x[idx::PHI],
-        );
+        let (vx, vy, psi, r) = (x[idx::VX], x[idx::VY], x[idx::PSI], x[idx::R]);
         let (sd, cd) = (held.sd, held.cd);
         let (sp, cp) = psi.sin_cos();
         let (t, _) = Self::brake_factor(vx);
         let fb = -fb_max * t;
         let fxf = self.bias * fb;
         let fxr = (1.0 - self.bias) * fb;
-        let fyf = front_lateral(&self.front, self.lf, vx, vy, r, sd, cd);
-        let fyr = rear_lateral(&self.rear, self.lr, vx, vy, r);
+        let fyf = front_lateral(&self.axles.front, self.lf, vx, vy, r, sd, cd);
+        let fyr = rear_lateral(&self.axles.rear, self.lr, vx, vy, r);
         let (fc, mc) = held.contact.force(sp, cp);
         let ffx = fxf * cd - fyf * sd;
         let ffy = fxf * sd + fyf * cd;
         let sfx = ffx + fxr + fc.x;
         let sfy = ffy + fyr + fc.y;
         let smz = self.lf * ffy - self.lr * fyr + mc;
-        let mroll = self.roll_k * phi - self.roll_c * p + fc.y * self.h_contact;
+        self.rates(x, sp, cp, [sfx, sfy, smz, fc.y])
+    }
+
+    /// `ẋ` from the force sums `[ΣF_x, ΣF_y, ΣM_z, F_cy]`: the 2 × 2 lateral/roll solve and
+    /// the kinematics. Shared by `eval` and `eval_jac`, so `step` and `step_jac` agree bit
+    /// for bit.
+    #[inline]
+    fn rates(&self, x: &TargetState, sp: f64, cp: f64, sums: [f64; 4]) -> TargetState {
+        let (vx, vy, r, p, phi) = (x[idx::VX], x[idx::VY], x[idx::R], x[idx::P], x[idx::PHI]);
+        let [sfx, sfy, smz, fcy] = sums;
+        let mroll = self.roll_k * phi - self.roll_c * p + fcy * self.h_contact;
         let ay = (self.ixx * sfy - self.ms_h * mroll) * self.inv_det;
         let pd = (self.mass * mroll - self.ms_h * sfy) * self.inv_det;
         TargetState::from([
@@ -218,7 +205,7 @@ impl FourDofTarget {
         const DELTA: usize = NX;
         const TB: usize = NX + 1;
         const FN: usize = NX + 2;
-        let (vx, vy, psi, r, p, phi) = (x[VX], x[VY], x[PSI], x[R], x[P], x[PHI]);
+        let (vx, vy, psi, r) = (x[VX], x[VY], x[PSI], x[R]);
         let (sd, cd) = (held.sd, held.cd);
         let (lf, lr, beta) = (self.lf, self.lr, self.bias);
         let (sp, cp) = psi.sin_cos();
@@ -230,8 +217,8 @@ impl FourDofTarget {
         let dfb_dtb = -self.inv_rw * t;
         let (fxf, fxr) = (beta * fb, (1.0 - beta) * fb);
         // Tyre lateral forces and the contact.
-        let ff = front_lateral_d(&self.front, lf, vx, vy, r, sd, cd);
-        let fr = rear_lateral_d(&self.rear, lr, vx, vy, r);
+        let ff = front_lateral_d(&self.axles.front, lf, vx, vy, r, sd, cd);
+        let fr = rear_lateral_d(&self.axles.rear, lr, vx, vy, r);
         let ct = held.contact.terms(sp, cp);
 
         // Front axle force in the body frame, and its gradient.
@@ -279,14 +266,11 @@ impl FourDofTarget {
         let sfx = ffx + fxr + ct.f.x;
         let sfy = ffy + fr.fy + ct.f.y;
         let smz = lf * ffy - lr * fr.fy + ct.m;
-        let mroll = self.roll_k * phi - self.roll_c * p + ct.f.y * self.h_contact;
         let (ixx, ms_h, m) = (
             self.ixx * self.inv_det,
             self.ms_h * self.inv_det,
             self.mass * self.inv_det,
         );
-        let ay = (self.ixx * sfy - self.ms_h * mroll) * self.inv_det;
-        let pd = (self.mass * mroll - self.ms_h * sfy) * self.inv_det;
 
         // Dynamics: v̇x, v̇y = a − vx r, ṙ, ṗ with (a, ṗ) from the 2 × 2 lateral/roll system.
         for col in 0..NJ {
@@ -309,16 +293,7 @@ impl FourDofTarget {
         j[(idx::Y, VY)] = cp;
         j[(idx::Y, PSI)] = vx * cp - vy * sp;
 
-        TargetState::from([
-            sfx * self.inv_mass + vy * r,
-            ay - vx * r,
-            r,
-            smz * self.inv_iz,
-            pd,
-            p,
-            vx * cp - vy * sp,
-            vx * sp + vy * cp,
-        ])
+        self.rates(x, sp, cp, [sfx, sfy, smz, ct.f.y])
     }
 }
 
