@@ -8,7 +8,7 @@ use dynamics::geometry::Vec2;
 use dynamics::params::{ParamSet, VehicleParams};
 use dynamics::target4dof::FourDofTarget as CoreFourDof;
 use dynamics::{ContactInput, TargetJacobians, TargetModel};
-use nalgebra::SVector;
+use nalgebra::{SMatrix, SVector};
 use numpy::{PyArray1, PyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -84,6 +84,37 @@ fn contact_arg(
     })
 }
 
+/// The arguments of every model `step`: state (N,), input (2,) and the contact.
+fn step_args<const N: usize>(
+    x: &Bound<'_, PyAny>,
+    u: &Bound<'_, PyAny>,
+    fc: Option<&Bound<'_, PyAny>>,
+    gamma: f64,
+    point: Option<&Bound<'_, PyAny>>,
+) -> PyResult<(SVector<f64, N>, SVector<f64, 2>, ContactInput)> {
+    Ok((
+        vec_arg::<N>(x, "x")?,
+        vec_arg::<2>(u, "u")?,
+        contact_arg(fc, gamma, point)?,
+    ))
+}
+
+/// `(x_next, A, B, F)` as fresh numpy arrays.
+fn jac_out<'py, const N: usize>(
+    py: Python<'py>,
+    next: &SVector<f64, N>,
+    a: &SMatrix<f64, N, N>,
+    b: &SMatrix<f64, N, 2>,
+    f: &SMatrix<f64, N, 2>,
+) -> StepJac<'py> {
+    (
+        vec_out(py, next),
+        mat_out(py, a),
+        mat_out(py, b),
+        mat_out(py, f),
+    )
+}
+
 /// The bullet's front-steer / rear-drive single-track model: state `[X, Y, yaw, vx, vy, r]`,
 /// input `[delta_f, T_r]`, one RK4 step of `dt` per call (in `substeps` sub-steps).
 #[pyclass(module = "picopit._core", name = "BulletModel")]
@@ -142,9 +173,7 @@ impl BulletModel {
         gamma: f64,
         point: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let x = vec_arg::<6>(x, "x")?;
-        let u = vec_arg::<2>(u, "u")?;
-        let c = contact_arg(fc, gamma, point)?;
+        let (x, u, c) = step_args::<6>(x, u, fc, gamma, point)?;
         let inner = &self.inner;
         let next = py.detach(move || inner.step(&x, &u, &c));
         Ok(vec_out(py, &next))
@@ -162,21 +191,14 @@ impl BulletModel {
         gamma: f64,
         point: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<StepJac<'py>> {
-        let x = vec_arg::<6>(x, "x")?;
-        let u = vec_arg::<2>(u, "u")?;
-        let c = contact_arg(fc, gamma, point)?;
+        let (x, u, c) = step_args::<6>(x, u, fc, gamma, point)?;
         let inner = &self.inner;
         let (next, jac) = py.detach(move || {
             let mut jac = BulletJacobians::default();
             let next = inner.step_jac(&x, &u, &c, &mut jac);
             (next, jac)
         });
-        Ok((
-            vec_out(py, &next),
-            mat_out(py, &jac.a),
-            mat_out(py, &jac.b),
-            mat_out(py, &jac.f),
-        ))
+        Ok(jac_out(py, &next, &jac.a, &jac.b, &jac.f))
     }
 }
 
@@ -244,9 +266,7 @@ impl FourDofTarget {
         gamma: f64,
         point: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let x = vec_arg::<8>(x, "x")?;
-        let u = vec_arg::<2>(u, "u")?;
-        let c = contact_arg(fc, gamma, point)?;
+        let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
         let inner = &mut self.inner;
         let next = py.detach(move || inner.step(&x, &u, &c));
         Ok(vec_out(py, &next))
@@ -264,21 +284,14 @@ impl FourDofTarget {
         gamma: f64,
         point: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<StepJac<'py>> {
-        let x = vec_arg::<8>(x, "x")?;
-        let u = vec_arg::<2>(u, "u")?;
-        let c = contact_arg(fc, gamma, point)?;
+        let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
         let inner = &mut self.inner;
         let (next, jac) = py.detach(move || {
             let mut jac = TargetJacobians::default();
             let next = inner.step_jac(&x, &u, &c, &mut jac);
             (next, jac)
         });
-        Ok((
-            vec_out(py, &next),
-            mat_out(py, &jac.a),
-            mat_out(py, &jac.b),
-            mat_out(py, &jac.f),
-        ))
+        Ok(jac_out(py, &next, &jac.a, &jac.b, &jac.f))
     }
 }
 
