@@ -41,6 +41,9 @@ pub(crate) fn rk4_substeps<const N: usize>(
 /// `a_of`, of which only the columns `active` may be nonzero (in the vehicle models the
 /// columns of the positions X, Y are zero: nothing depends on where the car is). The
 /// inactive state columns of `D` and `E` are then zero as well and are left alone.
+///
+/// With `accumulate = Some((jac, w))` each new column is also added, scaled by `w`, to
+/// `jac` while it is still in registers (RK4's `jac += w D_i`).
 #[inline]
 fn stage_update<const N: usize, const M: usize>(
     d: &mut SMatrix<f64, N, M>,
@@ -48,6 +51,7 @@ fn stage_update<const N: usize, const M: usize>(
     a_of: &SMatrix<f64, N, M>,
     e: &SMatrix<f64, N, M>,
     active: Range<usize>,
+    mut accumulate: Option<(&mut SMatrix<f64, N, M>, f64)>,
 ) {
     // ArrayStorage is column-major `[[f64; N]; M]`.
     let a = &a_of.data.0;
@@ -68,43 +72,10 @@ fn stage_update<const N: usize, const M: usize>(
                 *oi += ai * s;
             }
         }
-        *dc = acc;
-    }
-}
-
-/// `D ← J + α A D` as [`stage_update`] with `E = J` (the stage's own Jacobian, whose first N
-/// columns are `A`), fused with the RK4 accumulation `jac += w D` while each new column is
-/// still in registers; the inactive state columns (zero in every stage) are skipped.
-#[inline]
-fn stage_update_accumulate<const N: usize, const M: usize>(
-    d: &mut SMatrix<f64, N, M>,
-    alpha: f64,
-    j: &SMatrix<f64, N, M>,
-    active: Range<usize>,
-    jac: &mut SMatrix<f64, N, M>,
-    w: f64,
-) {
-    let a = &j.data.0;
-    for (col, ((dc, ec), out)) in d
-        .data
-        .0
-        .iter_mut()
-        .zip(&j.data.0)
-        .zip(jac.data.0.iter_mut())
-        .enumerate()
-    {
-        if col < N && !active.contains(&col) {
-            continue;
-        }
-        let mut acc = *ec;
-        for k in active.clone() {
-            let s = alpha * dc[k];
-            for (oi, ai) in acc.iter_mut().zip(&a[k]) {
-                *oi += ai * s;
+        if let Some((jac, w)) = accumulate.as_mut() {
+            for (o, v) in jac.data.0[col].iter_mut().zip(&acc) {
+                *o += *w * v;
             }
-        }
-        for (o, v) in out.iter_mut().zip(&acc) {
-            *o += w * v;
         }
         *dc = acc;
     }
@@ -175,7 +146,7 @@ pub(crate) fn rk4_jac<const N: usize, const M: usize>(
                      jac: &mut SMatrix<f64, N, M>,
                      w: f64| {
         let k = f(xs, &mut j);
-        stage_update_accumulate(d, c, &j, active.clone(), jac, w);
+        stage_update(d, c, &j, &j, active.clone(), Some((jac, w)));
         k
     };
     let k2 = stage(&(x + k1 * (0.5 * h)), 0.5 * h, &mut d, jac, h / 3.0);
@@ -205,7 +176,7 @@ pub(crate) fn rk4_jac_substeps<const N: usize, const M: usize>(
             let mut g = js;
             g.data.0[..N].fill([0.0; N]);
             // The sub-step's ∂x⁺/∂x has the identity in every column.
-            stage_update(jac, 1.0, &js, &g, 0..N);
+            stage_update(jac, 1.0, &js, &g, 0..N, None);
         }
     }
     xk
