@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Regenerate the shipped surrogates: for each parameter set, collision data from the plant,
+# the teacher PINN, PicoPINN and the evaluation. Intermediate outputs (data, checkpoints,
+# curves) go to runs/surrogates/<set>; the model files, the evaluation JSON/Markdown and the
+# small figures are copied into models/<set>. Seeds are fixed: the same tree gives the same
+# files (PyTorch CPU, 2 threads). Usage: models/regenerate.sh [full_size] [half_scale]
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+SEED="${SEED:-0}"
+EPISODES="${EPISODES:-1200}"
+SETS=("$@")
+[ ${#SETS[@]} -eq 0 ] && SETS=(full_size half_scale)
+for set in "${SETS[@]}"; do
+    run="runs/surrogates/$set"
+    dst="models/$set"
+    mkdir -p "$run" "$dst"
+    picopit datagen --params "$set" --episodes "$EPISODES" --seed "$SEED" --out "$run/data" --no-progress
+    picopit train --data "$run/data" --out "$run/train" --model "$dst/pinn.safetensors" --seed "$SEED" --no-progress
+    picopit compress --teacher "$dst/pinn.safetensors" --data "$run/data" --out "$run/compress" \
+        --model "$dst/picopinn.safetensors" --seed "$SEED" --no-progress
+    picopit eval-surrogates --data "$run/data" --pinn "$dst/pinn.safetensors" \
+        --picopinn "$dst/picopinn.safetensors" --out "$run/eval" --json "$dst/eval.json" --no-progress
+    cp "$run/data/manifest.json" "$dst/data_manifest.json"
+    cp "$run/eval/eval.md" "$dst/eval.md"
+    mkdir -p "$dst/figures"
+    cp "$run/train/train_curves.png" "$run/compress/cluster_threshold.png" \
+       "$run/compress/retrain_curves.png" "$run/eval/eval.png" "$dst/figures/"
+done

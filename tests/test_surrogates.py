@@ -1,0 +1,328 @@
+"""The learned-surrogate pipeline: physics prior, features, clustering, model files, datasets,
+and a tiny datagen -> train -> compress -> eval run through the CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("safetensors")
+pytest.importorskip("scipy")
+
+from safetensors import safe_open  # noqa: E402
+from safetensors.numpy import load_file, save_file  # noqa: E402
+
+from picopit import _core, load_params_dict  # noqa: E402
+from picopit import datagen  # noqa: E402
+from picopit.cli import main  # noqa: E402
+from picopit.compress import TensorClusters, choose_threshold, compressed_model  # noqa: E402
+from picopit.physics import FourDof  # noqa: E402
+from picopit.surrogate_nn import (FEATURES, OUTPUTS, ModelFileError, apply_increments,  # noqa: E402
+                                  dense_mlp, features, increments, load_model, save_model)
+from picopit.train import Split, physics_targets  # noqa: E402
+
+
+def _random_inputs(rng, n, contact=True):
+    x = np.column_stack([
+        rng.uniform(1, 30, n), rng.uniform(-3, 3, n), rng.uniform(-7, 7, n), rng.uniform(-2, 2, n),
+        rng.uniform(-0.5, 0.5, n), rng.uniform(-0.1, 0.1, n), rng.uniform(-100, 100, n), rng.uniform(-10, 10, n),
+    ])
+    u = np.column_stack([rng.uniform(-0.3, 0.3, n), rng.uniform(0, 3000, n)])
+    on = (rng.random(n) < 0.5) if contact else np.zeros(n, bool)
+    fn = rng.uniform(0, 3e4, n) * on
+    fc = np.column_stack([fn, rng.uniform(-0.4, 0.4, n) * fn])
+    gamma = rng.uniform(-math.pi, math.pi, n)
+    point = np.column_stack([rng.uniform(-2.5, 2.5, n), rng.uniform(-1, 1, n)])
+    return x, u, fc, gamma, point
+
+
+def _t(a):
+    return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64))
+
+
+def _stats(rng):
+    return {"in_mean": rng.normal(size=10), "in_std": rng.uniform(0.5, 2.0, 10) * np.array([10, 1, 1, 0.3, 0.05, 0.1, 1e3, 5e3, 5e3, 5e3]),
+            "out_mean": rng.normal(size=8) * 0.01, "out_std": rng.uniform(0.01, 0.5, 8)}
+
+
+# --------------------------------------------------------------------------------------
+# Physics prior
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("param_set", ["full_size", "half_scale"])
+@pytest.mark.parametrize("mu", [0.2, 0.9])
+def test_physics_residual_vanishes_on_fourdof_data(param_set, mu):
+    """The torch Newton-Euler step reproduces Rust FourDofTarget, so the physics residual
+    (network increment minus the integrated 4-DOF increment) is ~0 on 4-DOF data."""
+    rng = np.random.default_rng(1)
+    n = 300
+    x, u, fc, gamma, point = _random_inputs(rng, n)
+    rust = _core.FourDofTarget(param_set, mu=mu)
+    xn = np.array([rust.step(x[i], u[i], fc[i], gamma[i], point[i]) for i in range(n)])
+    m4 = FourDof.from_params(load_params_dict(param_set)["target"])
+    assert m4.substeps == rust.substeps
+    phys = m4.step(_t(x), _t(u), _t(fc), _t(gamma), _t(point), torch.full((n,), mu))
+    o_data = increments(_t(x), _t(xn))
+    o_phys = increments(_t(x), phys)
+    scale = o_data.std(0)
+    resid = ((o_data - o_phys) / scale).abs().max().item()
+    assert resid < 1e-6, resid
+    # ... and clearly not ~0 for a different road (the test can fail).
+    other = m4.step(_t(x), _t(u), _t(fc), _t(gamma), _t(point), torch.full((n,), 1.5 - mu))
+    assert ((o_data - increments(_t(x), other)) / scale).abs().max().item() > 1e-2
+
+
+def test_physics_targets_include_collocation_points():
+    rng = np.random.default_rng(2)
+    x, u, fc, gamma, point = _random_inputs(rng, 50)
+    xn = x + 0.01
+    a = {"x": x, "u": u, "fc": fc, "gamma": gamma, "point": point, "x_next": xn, "mu": np.full(50, 0.8),
+         "episode": np.zeros(50, np.int32), "step": np.arange(50, dtype=np.int32)}
+    s = Split.of(a, 4)
+    m4 = FourDof.from_params(load_params_dict("full_size")["target"])
+    p = physics_targets(s, m4, 0.5, seed=0)
+    assert p.z.shape == (75, 10) and p.o.shape == (75, 8)
+    assert torch.isfinite(p.o).all()
+
+
+# --------------------------------------------------------------------------------------
+# Features, increments, the network
+# --------------------------------------------------------------------------------------
+
+
+def test_increments_round_trip_and_feature_invariance():
+    rng = np.random.default_rng(3)
+    x, u, fc, gamma, point = _random_inputs(rng, 200)
+    xn = x + rng.normal(size=x.shape) * 0.3
+    back = apply_increments(_t(x), increments(_t(x), _t(xn)))
+    assert torch.allclose(back, _t(xn), atol=1e-10, rtol=0)
+    # Moving and rotating the world (state and γ together) leaves the features unchanged.
+    x2 = x.copy()
+    x2[:, 2] += 1.234
+    x2[:, 6:8] += 55.0
+    z1 = features(_t(x), _t(u), _t(fc), _t(gamma), _t(point))
+    z2 = features(_t(x2), _t(u), _t(fc), _t(gamma + 1.234), _t(point))
+    assert torch.allclose(z1, z2, atol=1e-9)
+    # The moment is the cross product of the point and the body-frame force.
+    assert torch.allclose(z1[:, 9], z1[:, 7] * 0 + _t(point[:, 0]) * z1[:, 8] - _t(point[:, 1]) * z1[:, 7])
+
+
+# --------------------------------------------------------------------------------------
+# Clustering
+# --------------------------------------------------------------------------------------
+
+
+def test_clustering_ties_weights_to_sign_times_centre_and_meets_budget():
+    rng = np.random.default_rng(4)
+    student = dense_mlp((10, 24, 24, 8), _stats(rng), seed=5)
+    with torch.no_grad():  # a few near-zero weights to be pruned
+        student.theta[:30] *= 1e-4
+    ws = [w.detach().numpy() for w, _ in student.weights()]
+    clusters = [TensorClusters.of(w) for w in ws]
+    n_bias = 24 + 24 + 8
+    budget = 300
+    t, count = choose_threshold(clusters, n_bias, budget, prune=0.02)
+    assert count <= budget
+    # the bisection's threshold is tight: a little less exceeds the budget
+    assert n_bias + sum(c.count(0.95 * t, 0.02) for c in clusters) > budget
+    pico, info = compressed_model(student, clusters, t, prune=0.02)
+    assert pico.param_count == count == info["free"]
+    for (w_hat, b_hat), w, c, (_, b) in zip(pico.weights(), ws, clusters, student.weights()):
+        labels, centres, sign = c.assign(t, 0.02)
+        expect = np.where(sign == 0, 0.0, np.sign(w) * centres[labels] if len(centres) else 0.0)
+        assert np.array_equal(w_hat.detach().numpy(), expect)  # exactly sign * centre
+        assert np.array_equal(b_hat.detach().numpy(), b.detach().numpy())  # biases stay free
+        for k in range(len(centres)):  # each centre is the mean |w| of its cluster
+            m = (labels == k) & (sign != 0)
+            assert math.isclose(centres[k], np.abs(w[m]).mean(), rel_tol=1e-12)
+    assert sum(int((s == 0).sum()) for s in (c.assign(t, 0.02)[2] for c in clusters)) >= 30
+
+
+# --------------------------------------------------------------------------------------
+# Model files
+# --------------------------------------------------------------------------------------
+
+
+def _write_model(tmp_path, name="m.safetensors", compressed=False):
+    rng = np.random.default_rng(6)
+    m = dense_mlp((10, 16, 16, 8), _stats(rng), seed=7)
+    if compressed:
+        c = [TensorClusters.of(w.detach().numpy()) for w, _ in m.weights()]
+        t, _ = choose_threshold(c, 40, 150, prune=0.05)
+        m, _ = compressed_model(m, c, t, prune=0.05)
+    path = tmp_path / name
+    save_model(m, path, kind="picopinn" if compressed else "pinn", dt=0.05, param_set="full_size",
+               provenance={"data_hash": "sha256:test", "seed": "7", "command": "test"})
+    return m, path
+
+
+@pytest.mark.parametrize("compressed", [False, True])
+def test_model_file_round_trip(tmp_path, compressed):
+    m, path = _write_model(tmp_path, compressed=compressed)
+    back, meta = load_model(path)
+    assert back.param_count == m.param_count and back.layers == [10, 16, 16, 8]
+    assert meta["format"] == "picopit-mlp" and meta["version"] == "1"
+    assert meta["features"] == ",".join(FEATURES) and meta["outputs"] == ",".join(OUTPUTS)
+    assert meta["layers"] == "10,16,16,8" and float(meta["dt"]) == 0.05 and meta["seed"] == "7"
+    assert meta["kind"] == ("picopinn" if compressed else "pinn")
+    z = _t(np.random.default_rng(8).normal(size=(50, 10)) * back.in_std.numpy())
+    with torch.no_grad():
+        assert torch.equal(m(z), back(z))
+    t = load_file(str(path))
+    assert t["theta"].dtype == np.float64 and t["layer1.weight.idx"].dtype == np.int32
+    assert t["layer1.weight.sign"].dtype == np.int8 and t["layer1.weight.idx"].shape == (16, 10)
+    if not compressed:  # the teacher's R is the identity
+        idx = np.concatenate([t[f"layer{l}.{p}.idx"].ravel() for l in (1, 2, 3) for p in ("weight", "bias")])
+        assert np.array_equal(np.sort(idx), np.arange(m.param_count))
+        assert all((t[f"layer{l}.weight.sign"] == 1).all() for l in (1, 2, 3))
+
+
+def _corrupt(tmp_path, edit):
+    _, path = _write_model(tmp_path)
+    t = load_file(str(path))
+    with safe_open(str(path), framework="numpy") as fh:
+        meta = dict(fh.metadata())
+    edit(t, meta)
+    bad = tmp_path / "bad.safetensors"
+    save_file(t, str(bad), metadata=meta)
+    return bad
+
+
+@pytest.mark.parametrize("edit, name", [
+    (lambda t, m: t.pop("in_std"), "in_std"),
+    (lambda t, m: t.__setitem__("theta", np.where(np.arange(t["theta"].size) == 3, np.nan, t["theta"])), "theta"),
+    (lambda t, m: t.__setitem__("out_std", -t["out_std"]), "out_std"),
+    (lambda t, m: t.__setitem__("layer2.weight.idx", t["layer2.weight.idx"] + 10_000), "layer2.weight.idx"),
+    (lambda t, m: t.__setitem__("layer1.bias.sign", t["layer1.bias.sign"] * 3), "layer1.bias.sign"),
+    (lambda t, m: t.__setitem__("layer3.weight.idx", t["layer3.weight.idx"].astype(np.int64)), "layer3.weight.idx"),
+    (lambda t, m: t.__setitem__("layer1.weight.sign", t["layer1.weight.sign"][:, :5].copy()), "layer1.weight.sign"),
+    (lambda t, m: m.pop("dt"), "dt"),
+    (lambda t, m: m.__setitem__("version", "2"), "version"),
+    (lambda t, m: m.__setitem__("features", "vx,vy"), "features"),
+    (lambda t, m: m.__setitem__("layers", "10,16,8"), "layer"),
+])
+def test_malformed_model_file_names_the_field(tmp_path, edit, name):
+    bad = _corrupt(tmp_path, edit)
+    with pytest.raises(ModelFileError, match=name.replace(".", r"\.")):
+        load_model(bad)
+
+
+def test_truncated_model_file(tmp_path):
+    _, path = _write_model(tmp_path)
+    data = path.read_bytes()
+    (tmp_path / "cut.safetensors").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ModelFileError, match="cut.safetensors"):
+        load_model(tmp_path / "cut.safetensors")
+
+
+# --------------------------------------------------------------------------------------
+# Datasets
+# --------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tiny_data(tmp_path_factory):
+    out = tmp_path_factory.mktemp("data")
+    cfg = datagen.DatagenConfig.for_params("half_scale", episodes=12, seed=11)
+    arrays, manifest = datagen.generate(cfg, progress=False)
+    datagen.write(arrays, manifest, out)
+    return out, arrays, manifest
+
+
+def test_datagen_records_contacts_free_motion_and_splits(tiny_data):
+    out, a, man = tiny_data
+    ds = datagen.load(out)
+    assert ds.data_hash == man["data_hash"]
+    contact = a["fc"][:, 0] > 0
+    assert contact.any() and (~contact).sum() > contact.sum()  # free motion before/after the hit
+    # the first touch of every episode is on the target's rear quarter or side (later ones may
+    # land anywhere once the target spins)
+    firsts = [np.nonzero(contact & (a["episode"] == e))[0] for e in np.unique(a["episode"])]
+    firsts = [f[0] for f in firsts if len(f)]
+    assert len(firsts) >= 10 and np.all(a["point"][firsts, 0] < 0.2 * 1.9)
+    # consecutive samples chain: x_next of step k is x of step k+1 in the same episode
+    w = datagen.windows(a, 2)
+    assert len(w) > 0 and np.array_equal(a["x_next"][w], a["x"][w + 1])
+    # splits by episode, all three present, no episode in two splits
+    per_ep = {int(e): set(a["split"][a["episode"] == e].tolist()) for e in np.unique(a["episode"])}
+    assert all(len(s) == 1 for s in per_ep.values())
+    assert {next(iter(s)) for s in per_ep.values()} == {0, 1, 2}
+    for key in ("sampling", "counts", "seed", "data_hash"):
+        assert key in man
+    # determinism with the seed
+    a2, m2 = datagen.generate(datagen.DatagenConfig.for_params("half_scale", episodes=12, seed=11), progress=False)
+    assert m2["data_hash"] == man["data_hash"]
+
+
+@pytest.mark.parametrize("edit, name", [
+    (lambda a: a.pop("gamma"), "gamma"),
+    (lambda a: a.__setitem__("x", np.where(np.arange(a["x"].size).reshape(a["x"].shape) == 5, np.inf, a["x"])), "'x'"),
+    (lambda a: a.__setitem__("u", a["u"][:, :1].copy()), "'u'"),
+    (lambda a: a["mu"].__setitem__(0, 0.5), "data_hash"),
+])
+def test_malformed_dataset_names_the_field(tiny_data, tmp_path, edit, name):
+    out, a, man = tiny_data
+    arrays = {k: v.copy() for k, v in a.items()}
+    edit(arrays)
+    np.savez(tmp_path / "dataset.npz", **arrays)
+    (tmp_path / "manifest.json").write_text(json.dumps(man))
+    with pytest.raises(datagen.DatasetError, match=name):
+        datagen.load(tmp_path)
+
+
+def test_datagen_config_errors_name_the_field():
+    with pytest.raises(datagen.DatasetError, match="episodes"):
+        datagen.DatagenConfig.for_params("full_size", episodes=1)
+    with pytest.raises(datagen.DatasetError, match="mu"):
+        datagen.DatagenConfig(mu=(0.0, 2.0)).validate()
+
+
+# --------------------------------------------------------------------------------------
+# The pipeline through the CLI
+# --------------------------------------------------------------------------------------
+
+
+def test_pipeline_smoke(tiny_data, tmp_path, capsys):
+    data, _, man = tiny_data
+    assert main(["train", "--data", str(data), "--out", str(tmp_path / "train"), "--epochs", "2",
+                 "--seed", "3", "--no-progress"]) == 0
+    pinn = tmp_path / "train" / "pinn.safetensors"
+    assert (tmp_path / "train" / "train_curves.png").is_file()
+    assert (tmp_path / "train" / "checkpoints" / "best.pt").is_file()
+    assert main(["compress", "--teacher", str(pinn), "--data", str(data), "--out", str(tmp_path / "cmp"),
+                 "--distil-epochs", "2", "--retrain-epochs", "2", "--no-progress"]) == 0
+    pico = tmp_path / "cmp" / "picopinn.safetensors"
+    for f in ("cluster_threshold.png", "retrain_curves.png"):
+        assert (tmp_path / "cmp" / f).is_file()
+    assert main(["eval-surrogates", "--data", str(data), "--pinn", str(pinn), "--picopinn", str(pico),
+                 "--horizon", "10", "--stride", "20", "--json", str(tmp_path / "e.json"),
+                 "--out", str(tmp_path / "ev"), "--no-progress"]) == 0
+    res = json.loads((tmp_path / "e.json").read_text())
+    assert set(res["models"]) == {"4dof", "pinn", "picopinn"}
+    for m in res["models"].values():
+        for k in ("params", "heading_rmse_rad", "roll_rmse_rad", "rollout_heading_rmse_rad"):
+            assert k in m and m[k] is not None
+    assert res["models"]["4dof"]["params"] == 0
+    assert res["models"]["pinn"]["params"] == 9544
+    assert 56 < res["models"]["picopinn"]["params"] <= 812
+    assert (tmp_path / "ev" / "eval.png").is_file()
+    _, meta = load_model(pico)
+    assert meta["data_hash"] == man["data_hash"] and meta["seed"] == "0" and meta["kind"] == "picopinn"
+    assert "picopit compress" in meta["command"] and meta["git_commit"]
+    assert "| parameters |" in capsys.readouterr().out
+
+
+def test_cli_bad_input_exits_2_naming_the_problem(tmp_path, capsys):
+    assert main(["train", "--data", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
+    assert "dataset.npz" in capsys.readouterr().err
+    assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--layers", "10,x,8"]) == 2
+    assert "layers" in capsys.readouterr().err
+    assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--epochs", "0"]) == 2
+    assert "epochs" in capsys.readouterr().err
+    assert main(["datagen", "--params", "nope", "--out", str(tmp_path / "d")]) == 2
+    assert "params" in capsys.readouterr().err
