@@ -1,0 +1,487 @@
+//! The tanh MLP of `docs/model-format.md`: forward pass and input Jacobian into
+//! preallocated buffers.
+//!
+//! Layout. Every layer's expanded weights ŵ are kept twice, transposed (`[in][out]`,
+//! for the forward pass as a sum of scaled columns and for the reverse-mode Jacobian) and
+//! row-major (`[out][in]`, for the forward-mode Jacobian). The Jacobian products are small
+//! matrix products `(m × n) · (n × K)` with `K` = 8 outputs (reverse mode) or 10 features
+//! (forward mode), four rows at a time so that the compiler keeps 4·K accumulators in
+//! vector registers; see `docs/pico_nn.md` for the measurements behind these choices.
+//!
+//! Kernels. The same code is compiled twice: with plain `a·b + c` for any x86-64 (or other)
+//! CPU, and with fused multiply-adds under `avx2,fma`, chosen at load when the CPU has
+//! them. The two differ only in rounding (≈ 1e-16 relative per operation);
+//! [`Kernel::Portable`] gives bit-identical results on every x86-64 machine.
+
+use crate::format::{Parsed, N_IN, N_OUT};
+
+/// Which compiled variant of the arithmetic runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kernel {
+    /// Separate multiply and add, baseline instruction set: bit-reproducible everywhere.
+    Portable,
+    /// AVX2 vectors with fused multiply-add (x86-64 CPUs that have both).
+    Avx2Fma,
+    /// AVX-512 vectors with fused multiply-add.
+    Avx512,
+}
+
+impl Kernel {
+    /// The fastest kernel this CPU runs.
+    #[must_use]
+    pub fn detect() -> Self {
+        if Self::Avx2Fma.available() {
+            Self::Avx2Fma
+        } else {
+            Self::Portable
+        }
+    }
+
+    /// Whether this CPU can run the kernel.
+    #[must_use]
+    pub fn available(self) -> bool {
+        match self {
+            Self::Portable => true,
+            #[cfg(target_arch = "x86_64")]
+            Self::Avx2Fma => {
+                std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma")
+            }
+            #[cfg(target_arch = "x86_64")]
+            Self::Avx512 => {
+                std::arch::is_x86_feature_detected!("avx512f")
+                    && std::arch::is_x86_feature_detected!("fma")
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            Self::Avx2Fma | Self::Avx512 => false,
+        }
+    }
+}
+
+/// How the input Jacobian is accumulated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JacobianMode {
+    /// Back-propagate the 8 output rows (`K = 8`); the default (faster, see the docs).
+    Reverse,
+    /// Push the 10 feature directions forward (`K = 10`).
+    Forward,
+}
+
+/// Multiply-add, `a·b + c`, plain or fused.
+trait Mac {
+    fn mac(a: f64, b: f64, c: f64) -> f64;
+}
+
+struct Plain;
+impl Mac for Plain {
+    #[inline(always)]
+    fn mac(a: f64, b: f64, c: f64) -> f64 {
+        a * b + c
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+struct Fused;
+#[cfg(target_arch = "x86_64")]
+impl Mac for Fused {
+    #[inline(always)]
+    fn mac(a: f64, b: f64, c: f64) -> f64 {
+        a.mul_add(b, c)
+    }
+}
+
+/// Expanded weights and statistics (immutable after load).
+#[derive(Debug, Clone)]
+struct Weights {
+    widths: Vec<usize>,
+    /// Per layer, ŵ transposed: `wt[l][j * out + i] = ŵ_l[i][j]`.
+    wt: Vec<Vec<f64>>,
+    /// Per layer, ŵ row-major: `w[l][i * in + j] = ŵ_l[i][j]`.
+    w: Vec<Vec<f64>>,
+    b: Vec<Vec<f64>>,
+    /// `∂o/∂h_{L−1}` transposed, `out_std[k] · ŵ_L[k][i]` at `[i * 8 + k]`.
+    out_gt: Vec<f64>,
+    in_mean: [f64; N_IN],
+    in_std: [f64; N_IN],
+    out_mean: [f64; N_OUT],
+    out_std: [f64; N_OUT],
+}
+
+/// Per-call working memory, sized at load.
+#[derive(Debug, Clone)]
+struct Scratch {
+    /// `h[0]` the normalised features, `h[l]` the activations of hidden layer `l`.
+    h: Vec<Vec<f64>>,
+    /// Two `max width × 10` buffers for the Jacobian products.
+    ga: Vec<f64>,
+    gb: Vec<f64>,
+}
+
+/// A loaded tanh MLP with its scratch memory.
+#[derive(Debug, Clone)]
+pub struct Mlp {
+    w: Weights,
+    s: Scratch,
+    kernel: Kernel,
+    mode: JacobianMode,
+}
+
+impl Mlp {
+    pub(crate) fn from_parsed(p: &Parsed) -> Self {
+        let widths = p.widths.clone();
+        let n_layers = widths.len() - 1;
+        let mut wt = Vec::with_capacity(n_layers);
+        let mut w = Vec::with_capacity(n_layers);
+        let mut b = Vec::with_capacity(n_layers);
+        for (l, layer) in p.layers.iter().enumerate() {
+            let (n_in, n_out) = (widths[l], widths[l + 1]);
+            let mut t = vec![0.0; n_in * n_out];
+            for i in 0..n_out {
+                for j in 0..n_in {
+                    t[j * n_out + i] = layer.weight[i * n_in + j];
+                }
+            }
+            wt.push(t);
+            w.push(layer.weight.clone());
+            b.push(layer.bias.clone());
+        }
+        let n_last = widths[n_layers - 1];
+        let last = &p.layers[n_layers - 1].weight;
+        let mut out_gt = vec![0.0; n_last * N_OUT];
+        for k in 0..N_OUT {
+            for i in 0..n_last {
+                out_gt[i * N_OUT + k] = p.out_std[k] * last[k * n_last + i];
+            }
+        }
+        let max_width = widths.iter().copied().max().unwrap_or(N_IN);
+        let h = widths[..n_layers].iter().map(|&n| vec![0.0; n]).collect();
+        Self {
+            w: Weights {
+                widths,
+                wt,
+                w,
+                b,
+                out_gt,
+                in_mean: p.in_mean,
+                in_std: p.in_std,
+                out_mean: p.out_mean,
+                out_std: p.out_std,
+            },
+            s: Scratch {
+                h,
+                ga: vec![0.0; max_width * N_IN],
+                gb: vec![0.0; max_width * N_IN],
+            },
+            kernel: Kernel::detect(),
+            mode: JacobianMode::Reverse,
+        }
+    }
+
+    /// Layer widths, input first (`[10, …, 8]`).
+    #[must_use]
+    pub fn widths(&self) -> &[usize] {
+        &self.w.widths
+    }
+
+    /// The kernel in use.
+    #[must_use]
+    pub fn kernel(&self) -> Kernel {
+        self.kernel
+    }
+
+    /// Use `kernel`, or [`Kernel::Portable`] if this CPU cannot run it; returns the
+    /// kernel now in use.
+    pub fn set_kernel(&mut self, kernel: Kernel) -> Kernel {
+        self.kernel = if kernel.available() {
+            kernel
+        } else {
+            Kernel::Portable
+        };
+        self.kernel
+    }
+
+    /// The Jacobian accumulation in use.
+    #[must_use]
+    pub fn jacobian_mode(&self) -> JacobianMode {
+        self.mode
+    }
+
+    /// Choose the Jacobian accumulation (both give the same Jacobian up to rounding).
+    pub fn set_jacobian_mode(&mut self, mode: JacobianMode) {
+        self.mode = mode;
+    }
+
+    /// The de-normalised network output `o` for the features `z`.
+    pub fn forward(&mut self, z: &[f64; N_IN]) -> [f64; N_OUT] {
+        match self.kernel {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `Avx2Fma` is only ever set after `available()` confirmed the CPU
+            // features (`set_kernel`, `Kernel::detect`).
+            Kernel::Avx2Fma => unsafe { forward_fma(&self.w, &mut self.s, z) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as above.
+            Kernel::Avx512 => unsafe { forward_avx512(&self.w, &mut self.s, z) },
+            _ => forward::<Plain>(&self.w, &mut self.s, z),
+        }
+    }
+
+    /// The output `o` and its Jacobian `jz[k][j] = ∂o_k/∂z_j`.
+    pub fn forward_jac(&mut self, z: &[f64; N_IN], jz: &mut [[f64; N_IN]; N_OUT]) -> [f64; N_OUT] {
+        match self.kernel {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as in `forward`.
+            Kernel::Avx2Fma => unsafe { forward_jac_fma(&self.w, &mut self.s, self.mode, z, jz) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as in `forward`.
+            Kernel::Avx512 => unsafe { forward_jac_avx512(&self.w, &mut self.s, self.mode, z, jz) },
+            _ => forward_jac::<Plain, 4>(&self.w, &mut self.s, self.mode, z, jz),
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn forward_fma(w: &Weights, s: &mut Scratch, z: &[f64; N_IN]) -> [f64; N_OUT] {
+    forward::<Fused>(w, s, z)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn forward_jac_fma(
+    w: &Weights,
+    s: &mut Scratch,
+    mode: JacobianMode,
+    z: &[f64; N_IN],
+    jz: &mut [[f64; N_IN]; N_OUT],
+) -> [f64; N_OUT] {
+    forward_jac::<Fused, 4>(w, s, mode, z, jz)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+fn forward_jac_avx512(
+    w: &Weights,
+    s: &mut Scratch,
+    mode: JacobianMode,
+    z: &[f64; N_IN],
+    jz: &mut [[f64; N_IN]; N_OUT],
+) -> [f64; N_OUT] {
+    forward_jac::<Fused, 8>(w, s, mode, z, jz)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+fn forward_avx512(w: &Weights, s: &mut Scratch, z: &[f64; N_IN]) -> [f64; N_OUT] {
+    forward::<Fused>(w, s, z)
+}
+
+/// `y[from..from + B] += Σ_j x_j · wt[j][from..from + B]` with `B` outputs held in
+/// registers, accumulated in two interleaved halves of `j` (twice the independent chains).
+#[inline(always)]
+fn add_columns_block<M: Mac, const B: usize>(y: &mut [f64], wt: &[f64], x: &[f64], from: usize) {
+    let n = y.len();
+    let mut even = [0.0; B];
+    let mut odd = [0.0; B];
+    even.copy_from_slice(&y[from..from + B]);
+    let mut pairs = x.chunks_exact(2);
+    let mut rows = wt.chunks_exact(2 * n);
+    for (xp, wp) in (&mut pairs).zip(&mut rows) {
+        let (w0, w1) = wp.split_at(n);
+        let (w0, w1) = (&w0[from..from + B], &w1[from..from + B]);
+        for i in 0..B {
+            even[i] = M::mac(xp[0], w0[i], even[i]);
+            odd[i] = M::mac(xp[1], w1[i], odd[i]);
+        }
+    }
+    if let (&[xl], Some(wl)) = (pairs.remainder(), rows.remainder().get(from..from + B)) {
+        for i in 0..B {
+            even[i] = M::mac(xl, wl[i], even[i]);
+        }
+    }
+    for i in 0..B {
+        y[from + i] = even[i] + odd[i];
+    }
+}
+
+/// `y += Σ_j x_j · wt[j]` where `wt` holds `x.len()` rows of `y.len()`: blocks of 16, 8, 4
+/// and 1 outputs.
+#[inline(always)]
+fn add_columns<M: Mac>(y: &mut [f64], wt: &[f64], x: &[f64]) {
+    let n = y.len();
+    let mut from = 0;
+    while from + 16 <= n {
+        add_columns_block::<M, 16>(y, wt, x, from);
+        from += 16;
+    }
+    if from + 8 <= n {
+        add_columns_block::<M, 8>(y, wt, x, from);
+        from += 8;
+    }
+    if from + 4 <= n {
+        add_columns_block::<M, 4>(y, wt, x, from);
+        from += 4;
+    }
+    while from < n {
+        add_columns_block::<M, 1>(y, wt, x, from);
+        from += 1;
+    }
+}
+
+/// `out (m × K) = a (m × n) · b (n × K)`, all row-major, `m = out.len() / K`, `R` rows
+/// of `a` at a time (`R·K` accumulators in registers).
+#[inline(always)]
+fn gemm<M: Mac, const K: usize, const R: usize>(out: &mut [f64], a: &[f64], b: &[f64], n: usize) {
+    let mut rows = a.chunks_exact(R * n);
+    let mut outs = out.chunks_exact_mut(R * K);
+    for (ar, or) in (&mut rows).zip(&mut outs) {
+        let mut acc = [[0.0; K]; R];
+        for (c, bc) in b.chunks_exact(K).enumerate() {
+            for r in 0..R {
+                let x = ar[r * n + c];
+                for k in 0..K {
+                    acc[r][k] = M::mac(x, bc[k], acc[r][k]);
+                }
+            }
+        }
+        for (o, acc) in or.chunks_exact_mut(K).zip(&acc) {
+            o.copy_from_slice(acc);
+        }
+    }
+    for (a1, o) in rows
+        .remainder()
+        .chunks_exact(n)
+        .zip(outs.into_remainder().chunks_exact_mut(K))
+    {
+        let mut acc = [0.0; K];
+        for (bc, &x) in b.chunks_exact(K).zip(a1) {
+            for k in 0..K {
+                acc[k] = M::mac(x, bc[k], acc[k]);
+            }
+        }
+        o.copy_from_slice(&acc);
+    }
+}
+
+#[inline(always)]
+fn forward<M: Mac>(w: &Weights, s: &mut Scratch, z: &[f64; N_IN]) -> [f64; N_OUT] {
+    for (j, h) in s.h[0].iter_mut().enumerate() {
+        *h = (z[j] - w.in_mean[j]) / w.in_std[j];
+    }
+    let n_layers = w.wt.len();
+    for l in 0..n_layers - 1 {
+        let (prev, next) = s.h.split_at_mut(l + 1);
+        let y = &mut next[0];
+        y.copy_from_slice(&w.b[l]);
+        add_columns::<M>(y, &w.wt[l], &prev[l]);
+        crate::tanh::tanh_in_place(y);
+    }
+    let mut y = [0.0; N_OUT];
+    y.copy_from_slice(&w.b[n_layers - 1]);
+    add_columns::<M>(&mut y, &w.wt[n_layers - 1], &s.h[n_layers - 1]);
+    let mut o = [0.0; N_OUT];
+    for k in 0..N_OUT {
+        o[k] = w.out_mean[k] + w.out_std[k] * y[k];
+    }
+    o
+}
+
+#[inline(always)]
+fn forward_jac<M: Mac, const R: usize>(
+    w: &Weights,
+    s: &mut Scratch,
+    mode: JacobianMode,
+    z: &[f64; N_IN],
+    jz: &mut [[f64; N_IN]; N_OUT],
+) -> [f64; N_OUT] {
+    let o = forward::<M>(w, s, z);
+    match mode {
+        JacobianMode::Reverse => reverse::<M, R>(w, s, jz),
+        JacobianMode::Forward => tangent::<M, R>(w, s, jz),
+    }
+    o
+}
+
+/// Reverse mode: `G ← diag(1 − h_l²) G`, `G ← ŵ_lᵀ G` from the output down, `G` stored
+/// `[unit][output]`.
+#[inline(always)]
+fn reverse<M: Mac, const R: usize>(w: &Weights, s: &mut Scratch, jz: &mut [[f64; N_IN]; N_OUT]) {
+    let n_layers = w.wt.len();
+    let widths = &w.widths;
+    let Scratch { h, ga, gb } = s;
+    let g0: &[f64] = if n_layers == 1 {
+        &w.out_gt
+    } else {
+        for l in (1..n_layers).rev() {
+            let n = widths[l];
+            let src: &[f64] = if l == n_layers - 1 {
+                &w.out_gt
+            } else {
+                &gb[..n * N_OUT]
+            };
+            let scaled = &mut ga[..n * N_OUT];
+            for ((dst, src), &hi) in scaled
+                .chunks_exact_mut(N_OUT)
+                .zip(src.chunks_exact(N_OUT))
+                .zip(&h[l])
+            {
+                let d = 1.0 - hi * hi;
+                for k in 0..N_OUT {
+                    dst[k] = src[k] * d;
+                }
+            }
+            gemm::<M, N_OUT, R>(&mut gb[..widths[l - 1] * N_OUT], &w.wt[l - 1], scaled, n);
+        }
+        &gb[..N_IN * N_OUT]
+    };
+    for (j, row) in g0.chunks_exact(N_OUT).enumerate() {
+        let inv = 1.0 / w.in_std[j];
+        for k in 0..N_OUT {
+            jz[k][j] = row[k] * inv;
+        }
+    }
+}
+
+/// Forward mode: `T_1 = diag(1 − h_1²) ŵ_1 diag(1/σ_in)`, `T_l = diag(1 − h_l²) ŵ_l T_{l−1}`,
+/// `J = diag(σ_out) ŵ_L T_{L−1}`, `T` stored `[unit][feature]`.
+#[inline(always)]
+fn tangent<M: Mac, const R: usize>(w: &Weights, s: &mut Scratch, jz: &mut [[f64; N_IN]; N_OUT]) {
+    let n_layers = w.wt.len();
+    let widths = &w.widths;
+    let Scratch { h, ga, gb } = s;
+    // T_0 = diag(1/σ_in) folded into the first product.
+    let first = &w.w[0];
+    let n1 = widths[1];
+    let d = |l: usize, i: usize| -> f64 {
+        if l == n_layers {
+            1.0
+        } else {
+            1.0 - h[l][i] * h[l][i]
+        }
+    };
+    for i in 0..n1 {
+        let di = d(1, i);
+        for j in 0..N_IN {
+            ga[i * N_IN + j] = di * first[i * N_IN + j] / w.in_std[j];
+        }
+    }
+    for l in 2..=n_layers {
+        let (n_in, n_out) = (widths[l - 1], widths[l]);
+        gemm::<M, N_IN, R>(
+            &mut gb[..n_out * N_IN],
+            &w.w[l - 1],
+            &ga[..n_in * N_IN],
+            n_in,
+        );
+        for i in 0..n_out {
+            let di = d(l, i);
+            for j in 0..N_IN {
+                ga[i * N_IN + j] = gb[i * N_IN + j] * di;
+            }
+        }
+    }
+    for k in 0..N_OUT {
+        for j in 0..N_IN {
+            jz[k][j] = w.out_std[k] * ga[k * N_IN + j];
+        }
+    }
+}

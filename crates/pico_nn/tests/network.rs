@@ -1,0 +1,277 @@
+//! The network and the step: a naive reference forward pass, Jacobians against central
+//! finite differences, and the teacher and clustered layouts of the same ŵ.
+
+mod common;
+
+use common::{clustered, random_dense, statistics, teacher};
+use dynamics::geometry::Vec2;
+use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
+use pico_nn::{JacobianMode, Kernel, SurrogateModel};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+const SHAPES: [&[usize]; 4] = [
+    &[10, 8],
+    &[10, 24, 24, 24, 8],
+    &[10, 32, 32, 8],
+    &[10, 64, 64, 64, 8],
+];
+
+/// The map of docs/model-format.md written as plainly as possible.
+fn reference(dense: &[(Vec<f64>, Vec<f64>)], z: &[f64; 10]) -> [f64; 8] {
+    let [im, is, om, os] = statistics();
+    let mut h: Vec<f64> = (0..10).map(|j| (z[j] - im[j]) / is[j]).collect();
+    for (l, (w, b)) in dense.iter().enumerate() {
+        let n_in = h.len();
+        let mut y: Vec<f64> = b
+            .iter()
+            .enumerate()
+            .map(|(i, bi)| bi + (0..n_in).map(|j| w[i * n_in + j] * h[j]).sum::<f64>())
+            .collect();
+        if l + 1 < dense.len() {
+            y.iter_mut().for_each(|v| *v = v.tanh());
+        }
+        h = y;
+    }
+    std::array::from_fn(|k| om[k] + os[k] * h[k])
+}
+
+fn random_case(rng: &mut ChaCha8Rng) -> (TargetState, TargetInput, ContactInput) {
+    let speed = rng.random_range(3.0..30.0);
+    let psi = rng.random_range(-7.0..7.0);
+    let x = TargetState::from([
+        speed,
+        rng.random_range(-2.0..2.0),
+        psi,
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-0.3..0.3),
+        rng.random_range(-0.05..0.05),
+        // Small positions keep the finite differences of X⁺, Y⁺ clear of round-off.
+        rng.random_range(-10.0..10.0),
+        rng.random_range(-10.0..10.0),
+    ]);
+    let u = TargetInput::new(rng.random_range(-0.3..0.3), rng.random_range(0.0..2000.0));
+    let f_n = if rng.random_bool(0.2) {
+        0.0
+    } else {
+        rng.random_range(0.0..15000.0)
+    };
+    let c = ContactInput {
+        fc: Vec2::new(f_n, rng.random_range(-0.5..0.5) * f_n),
+        gamma: psi + rng.random_range(-2.5..2.5),
+        point_in_body: Vec2::new(rng.random_range(-2.5..2.5), rng.random_range(-0.9..0.9)),
+    };
+    (x, u, c)
+}
+
+fn load(bytes: &[u8], kernel: Kernel, mode: JacobianMode) -> SurrogateModel {
+    SurrogateModel::from_bytes(bytes)
+        .expect("valid model")
+        .with_kernel(kernel)
+        .with_jacobian_mode(mode)
+}
+
+/// Every kernel and Jacobian mode (a kernel the CPU lacks falls back to the portable one).
+const VARIANTS: [(Kernel, JacobianMode); 6] = [
+    (Kernel::Portable, JacobianMode::Reverse),
+    (Kernel::Portable, JacobianMode::Forward),
+    (Kernel::Avx2Fma, JacobianMode::Reverse),
+    (Kernel::Avx2Fma, JacobianMode::Forward),
+    (Kernel::Avx512, JacobianMode::Reverse),
+    (Kernel::Avx512, JacobianMode::Forward),
+];
+
+#[test]
+fn forward_matches_the_plain_reference() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    for widths in SHAPES {
+        let dense = random_dense(widths, &mut rng);
+        let bytes = teacher("pinn", widths, &dense).to_bytes();
+        for (kernel, mode) in VARIANTS {
+            let mut m = load(&bytes, kernel, mode);
+            assert_eq!(m.layers(), widths);
+            for _ in 0..50 {
+                let (x, u, c) = random_case(&mut rng);
+                let z = SurrogateModel::features(&x, &u, &c);
+                let o = m.forward(&z);
+                let r = reference(&dense, &z);
+                for k in 0..8 {
+                    let tol = 1e-12 * r[k].abs().max(1.0);
+                    assert!(
+                        (o[k] - r[k]).abs() <= tol,
+                        "{widths:?} {kernel:?} o[{k}] = {} vs {}",
+                        o[k],
+                        r[k]
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn step_follows_the_next_state_formula() {
+    let mut rng = ChaCha8Rng::seed_from_u64(12);
+    let widths = [10, 16, 8];
+    let dense = random_dense(&widths, &mut rng);
+    let mut m =
+        SurrogateModel::from_bytes(&teacher("picopinn", &widths, &dense).to_bytes()).unwrap();
+    assert_eq!(m.name(), "picopinn");
+    assert_eq!(m.dt(), 0.05);
+    assert_eq!(m.param_count(), 10 * 16 + 16 + 16 * 8 + 8);
+    for _ in 0..20 {
+        let (x, u, c) = random_case(&mut rng);
+        // Features by hand: the force in the body frame and its moment.
+        let a = c.gamma - x[2];
+        let fb = Vec2::new(
+            a.cos() * c.fc.x - a.sin() * c.fc.y,
+            a.sin() * c.fc.x + a.cos() * c.fc.y,
+        );
+        let mz = c.point_in_body.x * fb.y - c.point_in_body.y * fb.x;
+        let z = [x[0], x[1], x[3], x[4], x[5], u[0], u[1], fb.x, fb.y, mz];
+        let zm = SurrogateModel::features(&x, &u, &c);
+        for j in 0..10 {
+            assert!(
+                (z[j] - zm[j]).abs() <= 1e-12 * z[j].abs().max(1.0),
+                "feature {j}"
+            );
+        }
+        let o = reference(&dense, &z);
+        let next = m.step(&x, &u, &c);
+        let (s, co) = x[2].sin_cos();
+        let expect = [
+            x[0] + o[0],
+            x[1] + o[1],
+            x[2] + o[5],
+            x[3] + o[2],
+            x[4] + o[3],
+            x[5] + o[4],
+            x[6] + co * o[6] - s * o[7],
+            x[7] + s * o[6] + co * o[7],
+        ];
+        for i in 0..8 {
+            assert!(
+                (next[i] - expect[i]).abs() <= 1e-11 * expect[i].abs().max(1.0),
+                "x+[{i}]"
+            );
+        }
+    }
+}
+
+/// Central differences of `step` in every argument, compared with `step_jac`.
+#[test]
+fn jacobians_match_central_differences() {
+    let mut rng = ChaCha8Rng::seed_from_u64(13);
+    for widths in SHAPES {
+        let dense = random_dense(widths, &mut rng);
+        let bytes = teacher("pinn", widths, &dense).to_bytes();
+        for (kernel, mode) in VARIANTS {
+            let mut m = load(&bytes, kernel, mode);
+            let mut jac = TargetJacobians::default();
+            for _ in 0..20 {
+                let (x, u, c) = random_case(&mut rng);
+                let next = m.step_jac(&x, &u, &c, &mut jac);
+                let plain = m.step(&x, &u, &c);
+                assert_eq!(next, plain, "step_jac and step give the same state");
+                // Fourth-order central differences: truncation O(h⁴), so the tolerance is
+                // mostly the round-off of differencing x⁺.
+                let check = |name: &str,
+                             col: usize,
+                             h: f64,
+                             exact: &dyn Fn(usize) -> f64,
+                             perturb: &dyn Fn(f64) -> TargetState| {
+                    let (p2, p1, m1, m2) =
+                        (perturb(2.0 * h), perturb(h), perturb(-h), perturb(-2.0 * h));
+                    for i in 0..8 {
+                        let fd = (8.0 * (p1[i] - m1[i]) - (p2[i] - m2[i])) / (12.0 * h);
+                        let e = exact(i);
+                        let tol = 1e-6 * fd.abs().max(e.abs()).max(1e-3)
+                            + 1e-14 * p1[i].abs().max(1.0) / h;
+                        assert!((fd - e).abs() <= tol, "{widths:?} {kernel:?} {mode:?} d x+[{i}] / d {name}[{col}]: exact {e}, fd {fd}");
+                    }
+                };
+                for col in 0..8 {
+                    let h = 1e-5 * x[col].abs().max(1.0);
+                    let perturb = |d: f64| {
+                        let mut xp = x;
+                        xp[col] += d;
+                        m.clone().step(&xp, &u, &c)
+                    };
+                    check("x", col, h, &|i| jac.a[(i, col)], &perturb);
+                }
+                for col in 0..2 {
+                    let h = 1e-5 * u[col].abs().max(1.0);
+                    let perturb = |d: f64| {
+                        let mut up = u;
+                        up[col] += d;
+                        m.clone().step(&x, &up, &c)
+                    };
+                    check("u", col, h, &|i| jac.b[(i, col)], &perturb);
+                    let h = 1e-5 * c.fc[col].abs().max(1.0);
+                    let perturb = |d: f64| {
+                        let mut cp = c;
+                        cp.fc[col] += d;
+                        m.clone().step(&x, &u, &cp)
+                    };
+                    check("fc", col, h, &|i| jac.f[(i, col)], &perturb);
+                }
+            }
+        }
+    }
+}
+
+/// Both Jacobian modes and both kernels agree to rounding.
+#[test]
+fn kernels_and_modes_agree() {
+    let mut rng = ChaCha8Rng::seed_from_u64(14);
+    let widths = [10, 64, 64, 64, 8];
+    let bytes = teacher("pinn", &widths, &random_dense(&widths, &mut rng)).to_bytes();
+    let mut models: Vec<SurrogateModel> = VARIANTS
+        .iter()
+        .map(|&(k, md)| load(&bytes, k, md))
+        .collect();
+    for _ in 0..50 {
+        let (x, u, c) = random_case(&mut rng);
+        let mut jacs = vec![TargetJacobians::default(); models.len()];
+        let nexts: Vec<TargetState> = models
+            .iter_mut()
+            .zip(&mut jacs)
+            .map(|(m, j)| m.step_jac(&x, &u, &c, j))
+            .collect();
+        for (n, j) in nexts.iter().zip(&jacs).skip(1) {
+            assert!((n - nexts[0]).amax() <= 1e-12 * nexts[0].amax().max(1.0));
+            assert!((j.a - jacs[0].a).amax() <= 1e-12 * jacs[0].a.amax().max(1.0));
+            assert!((j.b - jacs[0].b).amax() <= 1e-12 * jacs[0].b.amax().max(1e-3));
+            assert!((j.f - jacs[0].f).amax() <= 1e-12 * jacs[0].f.amax().max(1e-6));
+        }
+    }
+}
+
+/// A clustered file and the teacher layout of the same expanded ŵ are the same model,
+/// bit for bit.
+#[test]
+fn clustered_and_teacher_layouts_are_identical() {
+    let mut rng = ChaCha8Rng::seed_from_u64(15);
+    for widths in [&[10, 24, 24, 24, 8][..], &[10, 32, 32, 8]] {
+        let (spec, dense) = clustered(widths, 40, &mut rng);
+        assert!(
+            dense.iter().any(|(w, _)| w.contains(&0.0)),
+            "some weights are pruned"
+        );
+        let mut pico = SurrogateModel::from_bytes(&spec.to_bytes()).unwrap();
+        let mut full =
+            SurrogateModel::from_bytes(&teacher("pinn", widths, &dense).to_bytes()).unwrap();
+        assert_eq!(pico.param_count(), 40);
+        assert_eq!(pico.name(), "picopinn");
+        assert!(full.param_count() > 1000);
+        let (mut ja, mut jb) = (TargetJacobians::default(), TargetJacobians::default());
+        for _ in 0..50 {
+            let (x, u, c) = random_case(&mut rng);
+            assert_eq!(
+                pico.step_jac(&x, &u, &c, &mut ja),
+                full.step_jac(&x, &u, &c, &mut jb)
+            );
+            assert_eq!(ja, jb);
+        }
+    }
+}
