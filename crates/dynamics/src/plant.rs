@@ -438,6 +438,25 @@ impl Plant {
         b.cmd_torque = finite_or_zero(t_r);
     }
 
+    /// Bullet commands as the MPC plans them, `u_B = [δ_f, T_r]` with the rear-axle force
+    /// `F_x,r = η_d i_g T_r / R_w`, realised the way a vehicle interface would: a positive
+    /// T_r drives the rear axle, a negative one is blended into the service brakes (all four
+    /// wheels, the vehicle's brake bias) with the same total force `−η_d i_g T_r / R_w`, so
+    /// that braking while steering does not lock the driven axle alone.
+    pub fn set_bullet_command_blended(&mut self, delta: f64, t_r: f64) {
+        let gain = self.chassis[Which::Bullet as usize].drive_gain;
+        let t_r = finite_or_zero(t_r);
+        let (drive, brake) = if t_r >= 0.0 {
+            (t_r, 0.0)
+        } else {
+            (0.0, -gain * t_r)
+        };
+        let b = &mut self.bodies[Which::Bullet as usize];
+        b.cmd_steer = finite_or_zero(delta);
+        b.cmd_torque = drive;
+        b.cmd_brake = brake;
+    }
+
     /// Target driver commands: steer δ (rad) and total brake torque T_b ≥ 0 (N m).
     pub fn set_target_command(&mut self, delta: f64, t_b: f64) {
         let b = &mut self.bodies[Which::Target as usize];
