@@ -17,6 +17,7 @@ use pyo3::prelude::*;
 
 mod models;
 mod plant;
+mod surrogate;
 
 pyo3::create_exception!(
     picopit,
@@ -163,5 +164,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("GRAVITY", dynamics::GRAVITY)?;
     plant::register(m)?;
     models::register(m)?;
+    surrogate::register(m)?;
     Ok(())
 }

@@ -14,7 +14,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 /// `(x_next, A, B, F)` as numpy arrays.
-type StepJac<'py> = (
+pub(crate) type StepJac<'py> = (
     Bound<'py, PyArray1<f64>>,
     Bound<'py, PyArray2<f64>>,
     Bound<'py, PyArray2<f64>>,
@@ -85,7 +85,7 @@ fn contact_arg(
 }
 
 /// The arguments of every model `step`: state (N,), input (2,) and the contact.
-fn step_args<const N: usize>(
+pub(crate) fn step_args<const N: usize>(
     x: &Bound<'_, PyAny>,
     u: &Bound<'_, PyAny>,
     fc: Option<&Bound<'_, PyAny>>,
@@ -100,7 +100,7 @@ fn step_args<const N: usize>(
 }
 
 /// `(x_next, A, B, F)` as fresh numpy arrays.
-fn jac_out<'py, const N: usize>(
+pub(crate) fn jac_out<'py, const N: usize>(
     py: Python<'py>,
     next: &SVector<f64, N>,
     a: &SMatrix<f64, N, N>,

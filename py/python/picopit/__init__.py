@@ -11,7 +11,7 @@ import sys
 from typing import Any, Dict
 
 from . import _core
-from ._core import ParamError, builtin_param_sets, footprint, load_params, wrap_angle
+from ._core import ModelError, ParamError, builtin_param_sets, footprint, load_params, wrap_angle
 
 if sys.version_info >= (3, 11):
     import tomllib as _toml
@@ -26,6 +26,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0+unknown"
 
 __all__ = [
+    "ModelError",
     "ParamError",
     "builtin_param_sets",
     "footprint",
@@ -35,7 +36,7 @@ __all__ = [
 ]
 
 # The plant and the control models are bound as their Rust APIs land; re-export what exists.
-for _name in ("Plant", "BulletModel", "FourDofTarget"):
+for _name in ("Plant", "BulletModel", "FourDofTarget", "SurrogateModel"):
     if hasattr(_core, _name):
         globals()[_name] = getattr(_core, _name)
         __all__.append(_name)

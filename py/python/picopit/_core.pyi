@@ -5,7 +5,8 @@ copied, and a wrong shape or a non-finite value raises ValueError naming the arg
 Returned arrays are fresh float64 copies.
 """
 
-from typing import Optional, Sequence, Tuple, TypedDict, Union
+import os
+from typing import Dict, List, Optional, Sequence, Tuple, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +18,10 @@ GRAVITY: float
 
 class ParamError(ValueError):
     """A parameter set or parameter file that cannot be used; the message names the field."""
+
+class ModelError(ValueError):
+    """A surrogate model file that cannot be used; the message names the metadata key or
+    tensor (docs/model-format.md)."""
 
 def load_params(name_or_path: str) -> str:
     """Load and validate a parameter set (built-in name or TOML path); returns it as TOML."""
@@ -178,3 +183,50 @@ class FourDofTarget:
         point: Optional[_ArrayLike] = None,
     ) -> Tuple[_F64, _F64, _F64, _F64]:
         """``(x_next (8,), A (8, 8), B (8, 2), F (8, 2))``."""
+
+class SurrogateModel:
+    """A learned target surrogate (teacher PINN or PicoPINN) loaded from a ``picopit-mlp``
+    v1 safetensors file (docs/model-format.md): state ``[vx, vy, yaw, r, p, phi, X, Y]``,
+    input ``[delta, T_b]``, one step of the file's ``dt`` per call."""
+
+    def __init__(self, path: Union[str, os.PathLike[str]]) -> None:
+        """Load and validate the file (the GIL is released meanwhile). A file that cannot
+        be used raises ModelError naming the metadata key or tensor at fault."""
+    @property
+    def name(self) -> str:
+        """``pinn`` or ``picopinn`` (the file's ``kind``)."""
+    @property
+    def dt(self) -> float:
+        """Step length (s), from the file's metadata."""
+    @property
+    def param_count(self) -> int:
+        """Free parameters, ``len(theta)``."""
+    @property
+    def layers(self) -> List[int]:
+        """Layer widths, input first (``[10, ..., 8]``)."""
+    @property
+    def metadata(self) -> Dict[str, str]:
+        """Every key of the file's header metadata."""
+    def step(
+        self,
+        x: _ArrayLike,
+        u: _ArrayLike,
+        fc: Optional[_ArrayLike] = None,
+        gamma: float = 0.0,
+        point: Optional[_ArrayLike] = None,
+    ) -> _F64:
+        """The next state (8,); the arguments as for :meth:`FourDofTarget.step`."""
+    def step_jac(
+        self,
+        x: _ArrayLike,
+        u: _ArrayLike,
+        fc: Optional[_ArrayLike] = None,
+        gamma: float = 0.0,
+        point: Optional[_ArrayLike] = None,
+    ) -> Tuple[_F64, _F64, _F64, _F64]:
+        """``(x_next (8,), A (8, 8), B (8, 2), F (8, 2))``, F with ``gamma`` and ``point``
+        held fixed."""
+    def forward(self, features: _ArrayLike) -> _F64:
+        """The raw de-normalised network output ``o = [dvx, dvy, dr, dp, dphi, dpsi, dx_b,
+        dy_b]`` (8,) for ``features = [vx, vy, r, p, phi, delta, T_b, f_bx, f_by, M_z]``
+        (10,)."""

@@ -1,0 +1,125 @@
+//! Bindings for the learned target surrogates (`pico_nn::SurrogateModel`: teacher PINN and
+//! PicoPINN files, `docs/model-format.md`), with the same `step`/`step_jac` conventions as
+//! `FourDofTarget`.
+
+use crate::models::{jac_out, step_args, StepJac};
+use crate::{vec_arg, vec_out};
+use dynamics::{TargetJacobians, TargetModel};
+use numpy::PyArray1;
+use pico_nn::SurrogateModel as CoreSurrogate;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+pyo3::create_exception!(
+    picopit,
+    ModelError,
+    PyValueError,
+    "A surrogate model file that cannot be used; the message names the metadata key or tensor."
+);
+
+/// A teacher PINN or PicoPINN loaded from a `picopit-mlp` v1 safetensors file: state
+/// `[vx, vy, yaw, r, p, phi, X, Y]`, input `[delta, T_b]`, one step of the file's `dt`.
+#[pyclass(module = "picopit._core", name = "SurrogateModel")]
+pub struct SurrogateModel {
+    inner: CoreSurrogate,
+}
+
+#[pymethods]
+impl SurrogateModel {
+    #[new]
+    fn new(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let inner = py
+            .detach(move || CoreSurrogate::from_path(&path))
+            .map_err(|e| ModelError::new_err(e.to_string()))?;
+        Ok(Self { inner })
+    }
+
+    /// `pinn` or `picopinn` (the file's `kind`).
+    #[getter]
+    fn name(&self) -> String {
+        self.inner.name().to_owned()
+    }
+
+    /// Step length (s), from the file.
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.inner.dt()
+    }
+
+    /// Free parameters, `len(theta)`.
+    #[getter]
+    fn param_count(&self) -> usize {
+        self.inner.param_count()
+    }
+
+    /// Layer widths, input first.
+    #[getter]
+    fn layers(&self) -> Vec<usize> {
+        self.inner.layers().to_vec()
+    }
+
+    /// The file's header metadata.
+    #[getter]
+    fn metadata(&self) -> BTreeMap<String, String> {
+        self.inner.metadata().clone()
+    }
+
+    /// One step: the next state (8,).
+    #[pyo3(signature = (x, u, fc = None, gamma = 0.0, point = None))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        u: &Bound<'py, PyAny>,
+        fc: Option<&Bound<'py, PyAny>>,
+        gamma: f64,
+        point: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
+        let inner = &mut self.inner;
+        let next = py.detach(move || inner.step(&x, &u, &c));
+        Ok(vec_out(py, &next))
+    }
+
+    /// One step with the exact Jacobians of the discrete map:
+    /// `(x_next (8,), A (8, 8), B (8, 2), F (8, 2))`.
+    #[pyo3(signature = (x, u, fc = None, gamma = 0.0, point = None))]
+    fn step_jac<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        u: &Bound<'py, PyAny>,
+        fc: Option<&Bound<'py, PyAny>>,
+        gamma: f64,
+        point: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<StepJac<'py>> {
+        let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
+        let inner = &mut self.inner;
+        let (next, jac) = py.detach(move || {
+            let mut jac = TargetJacobians::default();
+            let next = inner.step_jac(&x, &u, &c, &mut jac);
+            (next, jac)
+        });
+        Ok(jac_out(py, &next, &jac.a, &jac.b, &jac.f))
+    }
+
+    /// The raw de-normalised network output `o` (8,) for the features
+    /// `[vx, vy, r, p, phi, delta, T_b, f_bx, f_by, M_z]` (10,).
+    fn forward<'py>(
+        &mut self,
+        py: Python<'py>,
+        features: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let z = vec_arg::<10>(features, "features")?;
+        let o = self.inner.forward(&z.into());
+        Ok(PyArray1::from_slice(py, &o))
+    }
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("ModelError", m.py().get_type::<ModelError>())?;
+    m.add_class::<SurrogateModel>()?;
+    Ok(())
+}
