@@ -148,25 +148,31 @@ fn pico(c: &mut Criterion) {
         }
     }
 
-    // Shipped models, if any.
-    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
-    let mut files: Vec<_> = std::fs::read_dir(models)
+    // Shipped models, if any: models/<parameter set>/<kind>.safetensors.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
+    let mut files: Vec<_> = std::fs::read_dir(root)
         .into_iter()
         .flatten()
         .flatten()
+        .flat_map(|set| {
+            std::fs::read_dir(set.path())
+                .into_iter()
+                .flatten()
+                .flatten()
+        })
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|e| e == "safetensors"))
         .collect();
     files.sort();
     for path in files {
+        let id = path
+            .strip_prefix(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models"))
+            .unwrap_or(&path)
+            .with_extension("")
+            .to_string_lossy()
+            .replace(['/', '\\'], "_");
         match SurrogateModel::from_path(&path) {
-            Ok(mut m) => {
-                let stem = path
-                    .file_stem()
-                    .map(|s| s.to_string_lossy().into_owned())
-                    .unwrap_or_default();
-                bench_step_jac(c, "pico_models", &format!("step_jac_{stem}"), &mut m, &data);
-            }
+            Ok(mut m) => bench_step_jac(c, "pico_models", &format!("step_jac_{id}"), &mut m, &data),
             Err(e) => eprintln!("skipping {}: {e}", path.display()),
         }
     }

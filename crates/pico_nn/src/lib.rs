@@ -10,7 +10,7 @@
 //!
 //! ```no_run
 //! use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
-//! let mut m = pico_nn::SurrogateModel::from_path("models/picopinn_full_size.safetensors")?;
+//! let mut m = pico_nn::SurrogateModel::from_path("models/full_size/picopinn.safetensors")?;
 //! let mut jac = TargetJacobians::default();
 //! let x = TargetState::from([15.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
 //! let next = m.step_jac(&x, &TargetInput::zeros(), &ContactInput::none(), &mut jac);

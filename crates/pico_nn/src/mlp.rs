@@ -8,10 +8,12 @@
 //! (forward mode), four rows at a time so that the compiler keeps 4·K accumulators in
 //! vector registers; see `docs/pico_nn.md` for the measurements behind these choices.
 //!
-//! Kernels. The same code is compiled twice: with plain `a·b + c` for any x86-64 (or other)
-//! CPU, and with fused multiply-adds under `avx2,fma`, chosen at load when the CPU has
-//! them. The two differ only in rounding (≈ 1e-16 relative per operation);
-//! [`Kernel::Portable`] gives bit-identical results on every x86-64 machine.
+//! Kernels. The same code is compiled three times: with plain `a·b + c` for any CPU, and
+//! with fused multiply-adds under `avx2,fma` and under `avx512f,fma`, the fastest chosen at
+//! load. Every output element is accumulated in the same order whatever the vector width,
+//! so the two FMA kernels agree bit for bit; they differ from the portable one only in
+//! rounding (≈ 1e-16 relative per operation). [`Kernel::Portable`] gives bit-identical
+//! results on every machine.
 
 use crate::format::{Parsed, N_IN, N_OUT};
 
@@ -27,14 +29,13 @@ pub enum Kernel {
 }
 
 impl Kernel {
-    /// The fastest kernel this CPU runs.
+    /// The fastest kernel this CPU runs (AVX-512, else AVX2, else portable).
     #[must_use]
     pub fn detect() -> Self {
-        if Self::Avx2Fma.available() {
-            Self::Avx2Fma
-        } else {
-            Self::Portable
-        }
+        [Self::Avx512, Self::Avx2Fma]
+            .into_iter()
+            .find(|k| k.available())
+            .unwrap_or(Self::Portable)
     }
 
     /// Whether this CPU can run the kernel.

@@ -275,3 +275,30 @@ fn clustered_and_teacher_layouts_are_identical() {
         }
     }
 }
+
+/// The two FMA kernels accumulate every element in the same order: bit-identical results
+/// (when this CPU has both).
+#[test]
+fn fma_kernels_agree_bit_for_bit() {
+    if !(Kernel::Avx2Fma.available() && Kernel::Avx512.available()) {
+        eprintln!("skipped: this CPU lacks AVX2+FMA or AVX-512");
+        return;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(16);
+    for widths in SHAPES {
+        let bytes = teacher("pinn", widths, &random_dense(widths, &mut rng)).to_bytes();
+        for mode in [JacobianMode::Reverse, JacobianMode::Forward] {
+            let mut a = load(&bytes, Kernel::Avx2Fma, mode);
+            let mut b = load(&bytes, Kernel::Avx512, mode);
+            let (mut ja, mut jb) = (TargetJacobians::default(), TargetJacobians::default());
+            for _ in 0..50 {
+                let (x, u, c) = random_case(&mut rng);
+                assert_eq!(
+                    a.step_jac(&x, &u, &c, &mut ja),
+                    b.step_jac(&x, &u, &c, &mut jb)
+                );
+                assert_eq!(ja, jb, "{widths:?} {mode:?}");
+            }
+        }
+    }
+}
