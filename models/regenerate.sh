@@ -7,7 +7,7 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 SEED="${SEED:-0}"
-EPISODES="${EPISODES:-1200}"
+EPISODES="${EPISODES:-600}"
 SETS=("$@")
 [ ${#SETS[@]} -eq 0 ] && SETS=(full_size half_scale)
 for set in "${SETS[@]}"; do

@@ -46,7 +46,7 @@ class TrainError(ValueError):
 @dataclass
 class TrainConfig:
     layers: Tuple[int, ...] = (10, 64, 64, 64, 8)
-    epochs: int = 80
+    epochs: int = 40
     batch: int = 1024
     lr: float = 3e-3
     lr_final: float = 1e-4
