@@ -1,0 +1,1188 @@
+//! The coupled collision MPC (see the crate docs and `docs/mpc.md`).
+
+use crate::clock::{Clock, MonotonicClock};
+use crate::geom::{edge_row, gap_gradient, pair_geometry, EdgeRow};
+use crate::plan::{rollout, Plan, RolloutCtx, Shapes};
+use crate::qp::{clarabel_settings, Emitter, Pattern, Qp, QpStatus};
+use crate::reference::Reference;
+use crate::settings::{MpcSettings, ScpMode, SettingsError};
+use dynamics::bullet::{BulletInput, BulletModel, BulletState};
+use dynamics::contact::obb_signed_distance;
+use dynamics::geometry::{Pose2, Vec2};
+use dynamics::params::ParamSet;
+use dynamics::road::{Obstacle, Road};
+use dynamics::{wrap_angle, TargetInput, TargetModel, TargetState};
+use thiserror::Error;
+
+const NT: usize = 8;
+const NB: usize = 6;
+const NX: usize = NT + NB;
+/// Columns of one stage: `[ũ (2), f̃ (2), s (1), δx_T (8), δx_B (6)]`.
+const STAGE: usize = 2 + 2 + 1 + NX;
+const O_U: usize = 0;
+const O_F: usize = 2;
+const O_S: usize = 4;
+const O_XT: usize = 5;
+const O_XB: usize = O_XT + NT;
+/// Inequality rows per stage.
+const ROWS: usize = 19;
+/// Target pose columns (X, Y, ψ) within x_T, bullet pose columns within x_B.
+const T_POSE: [usize; 3] = [6, 7, 2];
+const B_POSE: [usize; 3] = [0, 1, 2];
+/// Tracked state columns (relative to the stage's first state column).
+const TRACKED: [usize; 8] = [
+    O_XT + 6,
+    O_XT + 7,
+    O_XT + 2,
+    O_XT,
+    O_XB,
+    O_XB + 1,
+    O_XB + 2,
+    O_XB + 3,
+];
+/// A right-hand side that makes a row inactive.
+const FAR: f64 = 1.0e4;
+
+/// Bad construction input or settings.
+#[derive(Debug, Error)]
+pub enum MpcError {
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
+    #[error("mpc: the target model steps {model} s but the MPC step is {mpc} s")]
+    StepMismatch { model: f64, mpc: f64 },
+    #[error("mpc: road adhesion mu must be in (0, 1.5] (got {0})")]
+    Mu(f64),
+    #[error("mpc: the QP solver could not be set up: {0}")]
+    Solver(String),
+}
+
+/// Bad input to one control step (small and `Copy`: the hot path's error).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+pub enum SolveError {
+    #[error("mpc input: the target state is not finite")]
+    TargetState,
+    #[error("mpc input: the bullet state is not finite")]
+    BulletState,
+    #[error("mpc input: the target input is not finite")]
+    TargetInput,
+    #[error("mpc input: the last command is not finite")]
+    LastCommand,
+    #[error("mpc input: the reference has the wrong length or a non-finite value")]
+    Reference,
+}
+
+/// How a control step ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MpcStatus {
+    /// Converged mode: the step fell below the tolerance (or the merit stopped decreasing).
+    Converged,
+    /// RTI mode: the one QP of this step was solved and its step taken.
+    RtiStep,
+    /// Converged mode: the SCP iteration cap was reached with an accepted plan.
+    IterationCap,
+    /// The time budget ran out; the best accepted plan is used.
+    TimeBudget,
+    /// No usable QP solution: the command is the safe fallback.
+    QpFailure,
+}
+
+/// Which safe command was issued when no new plan is usable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fallback {
+    /// The previous plan shifted by one step.
+    ShiftedPlan,
+    /// Controlled braking: steer held straight to the target's side of the lane, torque at
+    /// half the braking limit.
+    Brake,
+}
+
+/// Wall-clock times of one control step (s).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepTimes {
+    /// Rollouts with Jacobians and geometry.
+    pub linearise: f64,
+    /// Filling P, q, A, b.
+    pub assemble: f64,
+    /// Clarabel (all QPs of the step).
+    pub qp: f64,
+    pub total: f64,
+}
+
+/// The result of one control step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MpcOutput {
+    pub status: MpcStatus,
+    /// The command to apply now: `[δ_f, T_r]`. Always finite.
+    pub command: BulletInput,
+    pub fallback: Option<Fallback>,
+    pub scp_iterations: u32,
+    pub qp_iterations: u32,
+    /// Merit (cost + exact penalty) of the plan the command comes from.
+    pub merit: f64,
+    /// Largest soft-constraint violation along that plan (m).
+    pub max_violation: f64,
+    pub times: StepTimes,
+}
+
+/// The input of one control step.
+#[derive(Debug, Clone, Copy)]
+pub struct MpcInput<'a> {
+    /// Time now (s), on the clock the obstacles' motion refers to.
+    pub time: f64,
+    pub target: TargetState,
+    pub bullet: BulletState,
+    /// The target driver's input, predicted constant over the horizon.
+    pub target_input: TargetInput,
+    /// The command applied over the last period (the start of the rate limits).
+    pub last_command: BulletInput,
+    pub road: Option<&'a Road>,
+    pub obstacles: &'a [Obstacle],
+    pub reference: &'a Reference,
+}
+
+/// Per-stage linearisation of the soft constraints at a plan.
+#[derive(Debug, Clone, Copy, Default)]
+struct SoftRows {
+    /// Gap gradients on bullet / target poses and the gap at x_{k+1}.
+    gap_b: [f64; 3],
+    gap_t: [f64; 3],
+    gap: f64,
+    /// The normal-force bound of f_k (N): `force_max` near contact, 0 apart.
+    fn_max: f64,
+    /// Whether the compliance band's upper side (row 18) is active at this stage.
+    band: bool,
+    road_b: EdgeRowC,
+    road_t: EdgeRowC,
+    obs_b: EdgeRowC,
+    obs_t: EdgeRowC,
+    /// Bullet position in the target frame and its gradients.
+    rel: Vec2Copy,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct EdgeRowC {
+    grad: [f64; 3],
+    rhs: f64,
+}
+
+impl Default for EdgeRowC {
+    fn default() -> Self {
+        Self {
+            grad: [0.0; 3],
+            rhs: FAR,
+        }
+    }
+}
+
+impl From<EdgeRow> for EdgeRowC {
+    fn from(r: EdgeRow) -> Self {
+        Self {
+            grad: r.grad,
+            rhs: r.rhs,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct Vec2Copy {
+    x: f64,
+    y: f64,
+}
+
+/// The coupled collision MPC: both vehicles' states, the bullet's inputs and the shared
+/// contact force over the horizon, solved by SCP over Clarabel QPs.
+///
+/// Memory: three [`Plan`]s (each about `N·(2·8·8 + 2·6·8 + 60)` doubles), the QP data
+/// (`n = 19 N` columns, `m = 32 N` rows, `nnz(A) ≈ 170 N`, `nnz(P) ≈ 50 N`) and Clarabel's
+/// workspace, all allocated in [`CoupledMpc::new`]; [`CoupledMpc::solve`] allocates nothing.
+pub struct CoupledMpc {
+    settings: MpcSettings,
+    n: usize,
+    bullet: BulletModel,
+    target: Box<dyn TargetModel + Send>,
+    shapes: Shapes,
+    steer_max: f64,
+    steer_rate: f64,
+    torque_min: f64,
+    torque_max: f64,
+    /// Variable scales: torque (N m) and force (N).
+    t_scale: f64,
+    f_scale: f64,
+    lin: Plan,
+    cand: Plan,
+    prev: Plan,
+    have_prev: bool,
+    /// Largest difference between the QP's predicted states and the nonlinear rollout of
+    /// its inputs at the last QP (a diagnostic of the linearisation).
+    model_error: f64,
+    stage_error: Vec<(f64, usize)>,
+    soft: Vec<SoftRows>,
+    qp: Qp,
+    clock: Box<dyn Clock + Send>,
+}
+
+impl std::fmt::Debug for CoupledMpc {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CoupledMpc")
+            .field("horizon", &self.n)
+            .field("target_model", &self.target.name())
+            .field("qp_columns", &self.qp.n)
+            .field("qp_rows", &self.qp.m)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Everything the assembly reads (borrowed apart from the QP buffers it writes).
+struct AssemblyView<'a> {
+    s: &'a MpcSettings,
+    lin: &'a Plan,
+    soft: &'a [SoftRows],
+    reference: &'a Reference,
+    last_command: BulletInput,
+    steer_max: f64,
+    steer_rate: f64,
+    torque_min: f64,
+    torque_max: f64,
+    t_scale: f64,
+    f_scale: f64,
+}
+
+impl CoupledMpc {
+    /// Build the controller: the bullet model from `params.bullet` at road adhesion `mu`,
+    /// the given target surrogate (its step must equal `settings.dt`), the QP pattern and
+    /// the Clarabel solver.
+    ///
+    /// # Errors
+    /// Invalid settings, a step mismatch, μ out of range, or a solver that cannot be built.
+    pub fn new(
+        params: &ParamSet,
+        mu: f64,
+        target: Box<dyn TargetModel + Send>,
+        settings: MpcSettings,
+    ) -> Result<Self, MpcError> {
+        settings.validate()?;
+        if !(mu.is_finite() && mu > 0.0 && mu <= 1.5) {
+            return Err(MpcError::Mu(mu));
+        }
+        if (target.dt() - settings.dt).abs() > 1e-12 {
+            return Err(MpcError::StepMismatch {
+                model: target.dt(),
+                mpc: settings.dt,
+            });
+        }
+        let n = settings.horizon;
+        let b = &params.bullet;
+        let bullet = BulletModel::new(b, mu, settings.dt);
+        let t_scale = b.drive_torque_max.abs().max(b.drive_torque_min.abs());
+        let f_scale = 0.25 * settings.contact.force_max;
+        let mut me = Self {
+            n,
+            bullet,
+            target,
+            shapes: Shapes::new(&params.bullet, &params.target),
+            steer_max: b.steer_max,
+            steer_rate: b.steer_rate_max,
+            torque_min: b.drive_torque_min,
+            torque_max: b.drive_torque_max,
+            t_scale,
+            f_scale,
+            lin: Plan::new(n),
+            cand: Plan::new(n),
+            prev: Plan::new(n),
+            have_prev: false,
+            model_error: 0.0,
+            stage_error: vec![(0.0, 0); n],
+            soft: vec![SoftRows::default(); n],
+            qp: Self::build_qp(&settings, n)?,
+            clock: Box::new(MonotonicClock::new()),
+            settings,
+        };
+        me.warm_up();
+        Ok(me)
+    }
+
+    /// Replace the clock the time budget and the step times are read from.
+    #[must_use]
+    pub fn with_clock(mut self, clock: Box<dyn Clock + Send>) -> Self {
+        self.clock = clock;
+        self
+    }
+
+    #[must_use]
+    pub fn settings(&self) -> &MpcSettings {
+        &self.settings
+    }
+
+    /// The target surrogate's name (`4dof`, `pinn`, `picopinn`).
+    #[must_use]
+    pub fn target_model_name(&self) -> &str {
+        self.target.name()
+    }
+
+    /// The target surrogate's trainable parameter count.
+    #[must_use]
+    pub fn target_param_count(&self) -> usize {
+        self.target.param_count()
+    }
+
+    /// QP size: (columns, rows).
+    #[must_use]
+    pub fn qp_size(&self) -> (usize, usize) {
+        (self.qp.n, self.qp.m)
+    }
+
+    /// The plan of the last control step (inputs, forces, both vehicles' predicted states).
+    #[must_use]
+    pub fn plan(&self) -> &Plan {
+        &self.prev
+    }
+
+    /// Forget the previous plan (the next step starts from holding the last command).
+    pub fn reset(&mut self) {
+        self.have_prev = false;
+    }
+
+    fn build_qp(settings: &MpcSettings, n: usize) -> Result<Qp, MpcError> {
+        let dummy = Plan::new(n);
+        let soft = vec![SoftRows::default(); n];
+        let reference = Reference::new(n);
+        let view = AssemblyView {
+            s: settings,
+            lin: &dummy,
+            soft: &soft,
+            reference: &reference,
+            last_command: BulletInput::zeros(),
+            steer_max: 1.0,
+            steer_rate: 1.0,
+            torque_min: -1.0,
+            torque_max: 1.0,
+            t_scale: 1.0,
+            f_scale: 1.0,
+        };
+        let (ncol, m) = (STAGE * n, (NX + ROWS) * n);
+        let mut q = vec![0.0; ncol];
+        let mut b = vec![0.0; m];
+        let mut pairs = Vec::new();
+        view.cost(&mut Emitter::pattern(&mut pairs, true), &mut q);
+        let p = Pattern::build(ncol, ncol, &pairs);
+        view.constraints(&mut Emitter::pattern(&mut pairs, false), &mut b);
+        let a = Pattern::build(m, ncol, &pairs);
+        let cs = clarabel_settings(&settings.qp, settings.time_budget);
+        Qp::new(p, a, NX * n, cs).map_err(MpcError::Solver)
+    }
+
+    /// Solve once on a neutral situation so that every lazily sized buffer (Clarabel's
+    /// included) reaches its working size before the first real control step.
+    fn warm_up(&mut self) {
+        let reference = Reference::new(self.n);
+        let mut xt = TargetState::zeros();
+        xt[0] = 10.0;
+        let mut xb = BulletState::zeros();
+        xb[0] = -20.0;
+        xb[3] = 10.0;
+        let input = MpcInput {
+            time: 0.0,
+            target: xt,
+            bullet: xb,
+            target_input: TargetInput::zeros(),
+            last_command: BulletInput::zeros(),
+            road: None,
+            obstacles: &[],
+            reference: &reference,
+        };
+        let _ = self.solve(&input);
+        self.have_prev = false;
+    }
+
+    /// One control step.
+    ///
+    /// # Errors
+    /// [`SolveError`] for non-finite input or a reference of the wrong length; numerical
+    /// trouble is a status ([`MpcStatus::QpFailure`] with a safe command), never an error.
+    pub fn solve(&mut self, input: &MpcInput<'_>) -> Result<MpcOutput, SolveError> {
+        check_input(input, self.n)?;
+        let t0 = self.clock.now();
+        let mut times = StepTimes::default();
+        // The linearisation point: the previous plan shifted by one step, or the last
+        // command held; projected onto the input bounds and rate limits.
+        self.init_linearisation(input);
+        let ctx_force = (
+            self.settings.contact.force_max,
+            self.settings.contact.gap_release,
+            self.settings.contact.friction,
+        );
+        let tl = self.clock.now();
+        self.rollout_lin(input, ctx_force);
+        self.linearise_soft(input);
+        times.linearise += self.clock.now() - tl;
+        let mut merit_lin = self.merit(&self.lin, input).0;
+
+        let max_iter = match self.settings.mode {
+            ScpMode::Rti => 1,
+            ScpMode::Converged => self.settings.max_scp_iter,
+        };
+        let mut trust = 1.0;
+        let mut status = MpcStatus::IterationCap;
+        let mut accepted_any = false;
+        let mut qp_iterations = 0;
+        let mut scp_iterations = 0;
+        let mut qp_failed = false;
+        for it in 0..max_iter {
+            let elapsed = self.clock.now() - t0;
+            let per_iter = if it == 0 {
+                0.0
+            } else {
+                elapsed / f64::from(it)
+            };
+            if it > 0 && elapsed + per_iter > self.settings.time_budget {
+                status = MpcStatus::TimeBudget;
+                break;
+            }
+            scp_iterations += 1;
+            let ta = self.clock.now();
+            self.assemble(input, trust);
+            times.assemble += self.clock.now() - ta;
+            let obj_lin = self.objective_at_lin();
+            let tq = self.clock.now();
+            let qs = self.qp.solve();
+            times.qp += self.clock.now() - tq;
+            qp_iterations += self.qp.iterations();
+            if !qs.usable() {
+                if qs == QpStatus::MaxTime {
+                    status = MpcStatus::TimeBudget;
+                }
+                qp_failed = !accepted_any;
+                break;
+            }
+            // Candidate: the QP's inputs and forces, rolled out through the nonlinear models.
+            let tl = self.clock.now();
+            self.candidate_from_qp();
+            self.rollout_cand(input, ctx_force);
+            self.model_error = self.qp_model_error();
+            times.linearise += self.clock.now() - tl;
+            let merit_cand = self.merit(&self.cand, input).0;
+            // The QP models the merit's change: its objective at the linearisation point
+            // (zero step, slacks at their smallest feasible value) minus at the solution.
+            let predicted = obj_lin - self.qp.objective();
+            let step = self.step_size();
+            if self.settings.mode == ScpMode::Rti {
+                self.lin.copy_from(&self.cand);
+                accepted_any = true;
+                status = MpcStatus::RtiStep;
+                break;
+            }
+            let actual = merit_lin - merit_cand;
+            if actual >= 0.1 * predicted.max(0.0) && merit_cand.is_finite() {
+                self.lin.copy_from(&self.cand);
+                merit_lin = merit_cand;
+                accepted_any = true;
+                let tl = self.clock.now();
+                self.linearise_soft(input);
+                times.linearise += self.clock.now() - tl;
+                if step < self.settings.step_tol * trust
+                    || predicted.abs() < 1e-6 * (1.0 + merit_lin.abs())
+                {
+                    status = MpcStatus::Converged;
+                    break;
+                }
+                if actual > 0.75 * predicted {
+                    trust = (trust * 2.0).min(1.0);
+                }
+            } else {
+                trust *= 0.25;
+                if trust < 1e-3 {
+                    status = MpcStatus::Converged;
+                    break;
+                }
+            }
+        }
+        let out = if qp_failed || !accepted_any && self.settings.mode == ScpMode::Rti {
+            self.fallback(input, qp_iterations, scp_iterations, times)
+        } else {
+            // Converged mode keeps the linearisation plan (the best accepted one, or the
+            // initial guess if nothing was accepted).
+            let (merit, viol) = self.merit(&self.lin, input);
+            if !self.lin.is_finite() {
+                self.fallback(input, qp_iterations, scp_iterations, times)
+            } else {
+                self.prev.copy_from(&self.lin);
+                self.have_prev = true;
+                MpcOutput {
+                    status,
+                    command: self.lin.u[0],
+                    fallback: None,
+                    scp_iterations,
+                    qp_iterations,
+                    merit,
+                    max_violation: viol,
+                    times,
+                }
+            }
+        };
+        let mut out = out;
+        out.times.total = self.clock.now() - t0;
+        Ok(out)
+    }
+
+    fn fallback(
+        &mut self,
+        input: &MpcInput<'_>,
+        qp_iterations: u32,
+        scp_iterations: u32,
+        times: StepTimes,
+    ) -> MpcOutput {
+        let (command, kind) = if self.have_prev && self.prev.is_finite() {
+            // Shift the previous plan: drop its first input.
+            let n = self.n;
+            self.prev.u.copy_within(1..n, 0);
+            self.prev.f.copy_within(1..n, 0);
+            self.prev.xt.copy_within(1..=n, 0);
+            self.prev.xb.copy_within(1..=n, 0);
+            (self.prev.u[0], Fallback::ShiftedPlan)
+        } else {
+            self.have_prev = false;
+            let steer = input.last_command[0].clamp(-self.steer_max, self.steer_max) * 0.5;
+            (
+                BulletInput::new(steer, 0.5 * self.torque_min),
+                Fallback::Brake,
+            )
+        };
+        MpcOutput {
+            status: MpcStatus::QpFailure,
+            command,
+            fallback: Some(kind),
+            scp_iterations,
+            qp_iterations,
+            merit: f64::INFINITY,
+            max_violation: 0.0,
+            times,
+        }
+    }
+
+    fn init_linearisation(&mut self, input: &MpcInput<'_>) {
+        let n = self.n;
+        if self.have_prev {
+            let (u_last, f_last) = (self.prev.u[n - 1], self.prev.f[n - 1]);
+            self.lin.u[..n - 1].copy_from_slice(&self.prev.u[1..]);
+            self.lin.f[..n - 1].copy_from_slice(&self.prev.f[1..]);
+            self.lin.u[n - 1] = u_last;
+            self.lin.f[n - 1] = f_last;
+        } else {
+            self.lin.u.fill(input.last_command);
+            self.lin.f.fill(Vec2::zeros());
+        }
+        // Project onto the bounds and the steer-rate limit.
+        let dmax = self.steer_rate * self.settings.dt;
+        let mut prev = input.last_command[0];
+        for u in &mut self.lin.u {
+            u[0] = u[0]
+                .clamp(-self.steer_max, self.steer_max)
+                .clamp(prev - dmax, prev + dmax);
+            u[1] = u[1].clamp(self.torque_min, self.torque_max);
+            prev = u[0];
+        }
+        self.lin.xt[0] = input.target;
+        self.lin.xb[0] = input.bullet;
+    }
+
+    fn rollout_lin(&mut self, input: &MpcInput<'_>, (fm, rel, mu): (f64, f64, f64)) {
+        let ctx = RolloutCtx {
+            bullet: &self.bullet,
+            shapes: &self.shapes,
+            target_input: &input.target_input,
+            force_max: fm,
+            release: rel,
+            friction: mu,
+        };
+        rollout(&ctx, self.target.as_mut(), &mut self.lin, true);
+    }
+
+    fn rollout_cand(&mut self, input: &MpcInput<'_>, (fm, rel, mu): (f64, f64, f64)) {
+        let ctx = RolloutCtx {
+            bullet: &self.bullet,
+            shapes: &self.shapes,
+            target_input: &input.target_input,
+            force_max: fm,
+            release: rel,
+            friction: mu,
+        };
+        self.cand.xt[0] = self.lin.xt[0];
+        self.cand.xb[0] = self.lin.xb[0];
+        rollout(&ctx, self.target.as_mut(), &mut self.cand, true);
+    }
+
+    /// Inputs and forces of the QP solution around `lin`.
+    fn candidate_from_qp(&mut self) {
+        let x = self.qp.x();
+        for k in 0..self.n {
+            let c = k * STAGE;
+            self.cand.u[k] = BulletInput::new(
+                self.lin.u[k][0] + x[c + O_U],
+                self.lin.u[k][1] + self.t_scale * x[c + O_U + 1],
+            );
+            self.cand.f[k] = Vec2::new(self.f_scale * x[c + O_F], self.f_scale * x[c + O_F + 1]);
+        }
+    }
+
+    /// Largest |x_QP − x_rollout| over the horizon and both vehicles' states, for the last
+    /// QP's step (∞-norm, SI units; positions in m, angles in rad, speeds in m/s).
+    #[must_use]
+    pub fn linearisation_error(&self) -> f64 {
+        self.model_error
+    }
+
+    /// Per stage of the last QP: the largest |x_QP − x_rollout| and which state it was
+    /// (0–7 target, 8–13 bullet).
+    #[must_use]
+    pub fn linearisation_error_by_stage(&self) -> &[(f64, usize)] {
+        &self.stage_error
+    }
+
+    fn qp_model_error(&mut self) -> f64 {
+        let x = self.qp.x();
+        let mut err: f64 = 0.0;
+        for k in 0..self.n {
+            let c0 = k * STAGE;
+            let mut worst = (0.0, 0);
+            for i in 0..NT {
+                let pred = self.lin.xt[k + 1][i] + x[c0 + O_XT + i];
+                let e = (pred - self.cand.xt[k + 1][i]).abs();
+                if e > worst.0 {
+                    worst = (e, i);
+                }
+            }
+            for i in 0..NB {
+                let pred = self.lin.xb[k + 1][i] + x[c0 + O_XB + i];
+                let e = (pred - self.cand.xb[k + 1][i]).abs();
+                if e > worst.0 {
+                    worst = (e, NT + i);
+                }
+            }
+            self.stage_error[k] = worst;
+            err = err.max(worst.0);
+        }
+        err
+    }
+
+    /// Size of the QP's input step relative to the trust region (∞-norm).
+    fn step_size(&self) -> f64 {
+        let x = self.qp.x();
+        let mut s: f64 = 0.0;
+        for k in 0..self.n {
+            let c = k * STAGE;
+            s = s
+                .max(x[c + O_U].abs() / self.settings.trust_steer)
+                .max(x[c + O_U + 1].abs() / self.settings.trust_torque);
+        }
+        s
+    }
+
+    /// Linearise the soft constraints along `lin` (states x_1 … x_N).
+    fn linearise_soft(&mut self, input: &MpcInput<'_>) {
+        let s = &self.settings;
+        for k in 0..self.n {
+            let (xt, xb) = (&self.lin.xt[k + 1], &self.lin.xb[k + 1]);
+            let pt = Vec2::new(xt[6], xt[7]);
+            let pb = Vec2::new(xb[0], xb[1]);
+            let g = self.lin.pair[k + 1];
+            let fb = self.shapes.bullet_obb(xb);
+            let ft = self.shapes.target_obb(xt);
+            let (gb, gt) = gap_gradient(&fb, &ft, pb, pt, &g);
+            let gap_start = self.lin.pair[k].gap;
+            let row = &mut self.soft[k];
+            row.gap_b = gb;
+            row.gap_t = gt;
+            row.gap = g.gap;
+            let near = gap_start.min(g.gap) <= s.contact.gap_release;
+            row.fn_max = if near { s.contact.force_max } else { 0.0 };
+            row.band = near;
+            if let Some(road) = input.road {
+                row.road_b = edge_row(road, &fb, pb, s.road_margin).into();
+                row.road_t = edge_row(road, &ft, pt, s.road_margin).into();
+            } else {
+                row.road_b = EdgeRowC::default();
+                row.road_t = EdgeRowC::default();
+            }
+            let t = input.time + (k + 1) as f64 * s.dt;
+            row.obs_b = nearest_obstacle(&fb, pb, input.obstacles, t, s.obstacle_clearance);
+            row.obs_t = nearest_obstacle(&ft, pt, input.obstacles, t, s.obstacle_clearance);
+            let (sn, cs) = xt[2].sin_cos();
+            let d = pb - pt;
+            row.rel = Vec2Copy {
+                x: cs * d.x + sn * d.y,
+                y: -sn * d.x + cs * d.y,
+            };
+        }
+    }
+
+    fn assemble(&mut self, input: &MpcInput<'_>, trust: f64) {
+        let view = AssemblyView {
+            s: &self.settings,
+            lin: &self.lin,
+            soft: &self.soft,
+            reference: input.reference,
+            last_command: input.last_command,
+            steer_max: self.steer_max,
+            steer_rate: self.steer_rate,
+            torque_min: self.torque_min,
+            torque_max: self.torque_max,
+            t_scale: self.t_scale,
+            f_scale: self.f_scale,
+        };
+        let qp = &mut self.qp;
+        let mut e = Emitter::values(&qp.p_slots, &mut qp.p_val, true);
+        view.cost(&mut e, &mut qp.q);
+        e.finish();
+        let mut e = Emitter::values(&qp.a_slots, &mut qp.a_val, false);
+        view.constraints_trust(&mut e, &mut qp.b, trust);
+        e.finish();
+    }
+
+    /// The QP objective at the linearisation point: zero steps, the forces of `lin`, each
+    /// slack at the largest linearised violation of its stage.
+    fn objective_at_lin(&mut self) -> f64 {
+        let n_eq = NX * self.n;
+        self.qp.z.fill(0.0);
+        for k in 0..self.n {
+            let c0 = k * STAGE;
+            self.qp.z[c0 + O_F] = self.lin.f[k].x / self.f_scale;
+            self.qp.z[c0 + O_F + 1] = self.lin.f[k].y / self.f_scale;
+            // Soft rows 10–16 read `… − s ≤ b`: at a zero step the slack must cover the
+            // force term of row 10 and every negative right-hand side.
+            let r0 = n_eq + ROWS * k;
+            let mut s: f64 = 0.0;
+            for i in 11..17 {
+                s = s.max(-self.qp.b[r0 + i]);
+            }
+            let f_over_k = self.lin.f[k].x / self.settings.contact.stiffness;
+            s = s.max(-self.qp.b[r0 + 10] - f_over_k);
+            s = s.max(f_over_k - self.qp.b[r0 + 18]);
+            self.qp.z[c0 + O_S] = s.max(0.0);
+        }
+        self.qp.objective_at_z()
+    }
+
+    /// Merit of a plan: smooth cost + penalty · Σ_k (largest soft violation at step k).
+    /// Returns (merit, largest violation).
+    fn merit(&self, plan: &Plan, input: &MpcInput<'_>) -> (f64, f64) {
+        let (smooth, pen, viol) = self.merit_parts(plan, input);
+        (smooth + self.settings.weights.penalty * pen, viol)
+    }
+
+    fn merit_parts(&self, plan: &Plan, input: &MpcInput<'_>) -> (f64, f64, f64) {
+        let s = &self.settings;
+        let w = &s.weights;
+        let r = input.reference;
+        let mut cost = 0.0;
+        let mut pen = 0.0;
+        let mut worst: f64 = 0.0;
+        let mut u_prev = input.last_command;
+        for k in 0..self.n {
+            let (xt, xb) = (&plan.xt[k + 1], &plan.xb[k + 1]);
+            let st = &r.stages[k];
+            // Tracking.
+            let (sn, cs) = xt[2].sin_cos();
+            let d = Vec2::new(xb[0] - xt[6], xb[1] - xt[7]);
+            let rel = Vec2::new(cs * d.x + sn * d.y, -sn * d.x + cs * d.y);
+            let e = [
+                rel.x - st.rel_pos.x,
+                rel.y - st.rel_pos.y,
+                xb[2] - xt[2] - st.rel_heading,
+                xb[3] - xt[0] - st.rel_speed,
+            ];
+            let we = [w.rel_long, w.rel_lat, w.rel_heading, w.rel_speed];
+            for i in 0..4 {
+                cost += st.track * we[i] * e[i] * e[i];
+            }
+            // Corridor.
+            let f = plan.f[k];
+            let dist = (f.x - f.x.clamp(st.fn_lo, st.fn_hi)) / self.f_scale;
+            cost += w.corridor * dist * dist;
+            // Effort and rate.
+            let u = plan.u[k];
+            let tn = u[1] / self.t_scale;
+            cost += w.steer * u[0] * u[0] + w.torque * tn * tn;
+            let du = u - u_prev;
+            let dtn = du[1] / self.t_scale;
+            cost += w.steer_rate * du[0] * du[0] + w.torque_rate * dtn * dtn;
+            u_prev = u;
+            // Soft constraints (nonlinear geometry).
+            let g = plan.pair[k + 1].gap;
+            let f_over_k = f.x / s.contact.stiffness;
+            let mut v: f64 = (-g - f_over_k).max(0.0);
+            if f.x > 0.0 {
+                v = v.max(f_over_k + g - s.contact.band);
+            }
+            let fb = self.shapes.bullet_obb(xb);
+            let ft = self.shapes.target_obb(xt);
+            if let Some(road) = input.road {
+                v = v.max(s.road_margin - road.edge_distance(&fb));
+                v = v.max(s.road_margin - road.edge_distance(&ft));
+            }
+            let t = input.time + (k + 1) as f64 * s.dt;
+            for o in input.obstacles {
+                let of = o.footprint_at(t);
+                v = v.max(s.obstacle_clearance - obb_signed_distance(&fb, &of));
+                v = v.max(s.obstacle_clearance - obb_signed_distance(&ft, &of));
+            }
+            v = v.max((rel.y - st.rel_pos.y).abs() - st.envelope_lat);
+            let v = v.max(0.0);
+            pen += v;
+            worst = worst.max(v);
+        }
+        // Target objective at x_N.
+        let xt = &plan.xt[self.n];
+        let eh = xt[2] - r.target_heading;
+        cost += w.target
+            * r.target_weight
+            * (w.target_heading * eh * eh + w.target_speed * (xt[0] * xt[0] + xt[1] * xt[1]));
+        (cost, pen, worst)
+    }
+}
+
+fn nearest_obstacle(
+    fp: &dynamics::geometry::Obb,
+    cg: Vec2,
+    obstacles: &[Obstacle],
+    t: f64,
+    clearance: f64,
+) -> EdgeRowC {
+    let mut best = f64::INFINITY;
+    let mut which = None;
+    for (i, o) in obstacles.iter().enumerate() {
+        let d = obb_signed_distance(fp, &o.footprint_at(t));
+        if d < best {
+            best = d;
+            which = Some(i);
+        }
+    }
+    match which {
+        Some(i) => {
+            let of = obstacles[i].footprint_at(t);
+            let g = pair_geometry(fp, &of);
+            let (gv, _) = gap_gradient(fp, &of, cg, of.center, &g);
+            // gap ≥ clearance − s  ⇔  −∇gap·δ − s ≤ gap − clearance.
+            EdgeRowC {
+                grad: [-gv[0], -gv[1], -gv[2]],
+                rhs: g.gap - clearance,
+            }
+        }
+        None => EdgeRowC::default(),
+    }
+}
+
+fn check_input(input: &MpcInput<'_>, n: usize) -> Result<(), SolveError> {
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    if !finite(input.target.as_slice()) {
+        return Err(SolveError::TargetState);
+    }
+    if !finite(input.bullet.as_slice()) {
+        return Err(SolveError::BulletState);
+    }
+    if !finite(input.target_input.as_slice()) {
+        return Err(SolveError::TargetInput);
+    }
+    if !finite(input.last_command.as_slice()) {
+        return Err(SolveError::LastCommand);
+    }
+    let r = input.reference;
+    let ok = r.stages.len() == n
+        && r.target_heading.is_finite()
+        && r.target_weight.is_finite()
+        && r.stages.iter().all(|s| {
+            s.rel_pos.iter().all(|v| v.is_finite())
+                && s.rel_heading.is_finite()
+                && s.rel_speed.is_finite()
+                && s.track.is_finite()
+                && s.track >= 0.0
+                && s.fn_lo.is_finite()
+                && s.fn_hi.is_finite()
+                && s.envelope_lat.is_finite()
+        });
+    if ok {
+        Ok(())
+    } else {
+        Err(SolveError::Reference)
+    }
+}
+
+impl AssemblyView<'_> {
+    fn col(k: usize, off: usize) -> usize {
+        k * STAGE + off
+    }
+
+    /// P (upper triangle) and q. Every `put` is unconditional: the pattern is fixed.
+    fn cost(&self, e: &mut Emitter<'_>, q: &mut [f64]) {
+        let n = self.lin.len();
+        let w = &self.s.weights;
+        let r = self.reference;
+        q.fill(0.0);
+        let prox = 2.0 * w.proximal;
+        for k in 0..n {
+            let c0 = k * STAGE;
+            let st = &r.stages[k];
+            let (xt, xb) = (&self.lin.xt[k + 1], &self.lin.xb[k + 1]);
+            // --- Tracking residuals r_i = r̄_i + Σ c_ij δ_j over TRACKED columns.
+            let (sn, cs) = xt[2].sin_cos();
+            let d = Vec2::new(xb[0] - xt[6], xb[1] - xt[7]);
+            let rel = Vec2::new(cs * d.x + sn * d.y, -sn * d.x + cs * d.y);
+            // Columns: XT, YT, ψT, vxT, XB, YB, ψB, vxB.
+            let jac: [[f64; 8]; 4] = [
+                [-cs, -sn, rel.y, 0.0, cs, sn, 0.0, 0.0],
+                [sn, -cs, -rel.x, 0.0, -sn, cs, 0.0, 0.0],
+                [0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+                [0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0],
+            ];
+            let res = [
+                rel.x - st.rel_pos.x,
+                rel.y - st.rel_pos.y,
+                xb[2] - xt[2] - st.rel_heading,
+                xb[3] - xt[0] - st.rel_speed,
+            ];
+            let we = [w.rel_long, w.rel_lat, w.rel_heading, w.rel_speed].map(|v| v * st.track);
+            let mut h = [[0.0; 8]; 8];
+            let mut g = [0.0; 8];
+            for i in 0..4 {
+                for a in 0..8 {
+                    g[a] += 2.0 * we[i] * res[i] * jac[i][a];
+                    for b in a..8 {
+                        h[a][b] += 2.0 * we[i] * jac[i][a] * jac[i][b];
+                    }
+                }
+            }
+            // Target objective at the last stage.
+            if k == n - 1 {
+                let wt = w.target * r.target_weight;
+                let eh = xt[2] - r.target_heading;
+                h[2][2] += 2.0 * wt * w.target_heading;
+                g[2] += 2.0 * wt * w.target_heading * eh;
+                h[3][3] += 2.0 * wt * w.target_speed;
+                g[3] += 2.0 * wt * w.target_speed * xt[0];
+            }
+            for a in 0..8 {
+                q[c0 + TRACKED[a]] += g[a];
+                for b in a..8 {
+                    e.put(c0 + TRACKED[a], c0 + TRACKED[b], h[a][b]);
+                }
+            }
+            // vy_T (terminal speed) and the proximal term on every state column.
+            let vy_t = c0 + O_XT + 1;
+            let wvy = if k == n - 1 {
+                2.0 * w.target * r.target_weight * w.target_speed
+            } else {
+                0.0
+            };
+            e.put(vy_t, vy_t, wvy);
+            q[vy_t] += wvy * xt[1];
+            for j in 0..NX {
+                e.put(c0 + O_XT + j, c0 + O_XT + j, prox);
+            }
+            // --- Inputs: effort, rate (coupled to the previous stage), proximal.
+            let u = self.lin.u[k];
+            let u_prev = if k == 0 {
+                self.last_command
+            } else {
+                self.lin.u[k - 1]
+            };
+            let scales = [1.0, self.t_scale];
+            let wu = [w.steer, w.torque];
+            let wr = [w.steer_rate, w.torque_rate];
+            for i in 0..2 {
+                let col = c0 + O_U + i;
+                let ubar = u[i] / scales[i];
+                let dbar = (u[i] - u_prev[i]) / scales[i];
+                // Effort wu (ū + ũ)²; rate wr (ū_k + ũ_k − ū_{k−1} − ũ_{k−1})².
+                let mut diag = 2.0 * wu[i] + 2.0 * wr[i] + prox;
+                q[col] += 2.0 * wu[i] * ubar + 2.0 * wr[i] * dbar;
+                if k + 1 < n {
+                    diag += 2.0 * wr[i];
+                    let un = self.lin.u[k + 1];
+                    q[col] -= 2.0 * wr[i] * (un[i] - u[i]) / scales[i];
+                }
+                e.put(col, col, diag);
+                if k > 0 {
+                    e.put(Self::col(k - 1, O_U + i), col, -2.0 * wr[i]);
+                }
+            }
+            // --- Force: corridor (Gauss–Newton on the squared distance) and proximal.
+            let f = self.lin.f[k];
+            let fs = self.f_scale;
+            let proj = f.x.clamp(st.fn_lo, st.fn_hi);
+            let outside = if (f.x - proj).abs() > 0.0 { 1.0 } else { 0.0 };
+            let wc = 2.0 * w.corridor * outside;
+            let fcol = c0 + O_F;
+            e.put(fcol, fcol, wc + prox);
+            q[fcol] += -wc * proj / fs - prox * f.x / fs;
+            e.put(fcol + 1, fcol + 1, prox);
+            q[fcol + 1] += -prox * f.y / fs;
+            // --- Slack: exact L1 penalty plus a little curvature.
+            e.put(c0 + O_S, c0 + O_S, prox);
+            q[c0 + O_S] += w.penalty;
+        }
+    }
+
+    fn constraints(&self, e: &mut Emitter<'_>, b: &mut [f64]) {
+        self.constraints_trust(e, b, 1.0);
+    }
+
+    /// A and b: dynamics (equalities) then the inequality rows of every stage.
+    fn constraints_trust(&self, e: &mut Emitter<'_>, b: &mut [f64], trust: f64) {
+        let n = self.lin.len();
+        let s = self.s;
+        let fs = self.f_scale;
+        let ts = self.t_scale;
+        let n_eq = NX * n;
+        for k in 0..n {
+            let c0 = k * STAGE;
+            let r0 = NX * k;
+            let jt = &self.lin.jt[k];
+            let jb = &self.lin.jb[k];
+            let f = self.lin.f[k];
+            // Target rows.
+            for i in 0..NT {
+                e.put(r0 + i, c0 + O_XT + i, 1.0);
+                if k > 0 {
+                    for l in 0..NT {
+                        e.put(r0 + i, Self::col(k - 1, O_XT + l), -jt.a[(i, l)]);
+                    }
+                }
+                for c in 0..2 {
+                    e.put(r0 + i, c0 + O_F + c, -jt.f[(i, c)] * fs);
+                }
+                b[r0 + i] = -(jt.f[(i, 0)] * f.x + jt.f[(i, 1)] * f.y);
+            }
+            // Bullet rows.
+            for i in 0..NB {
+                let r = r0 + NT + i;
+                e.put(r, c0 + O_XB + i, 1.0);
+                if k > 0 {
+                    for l in 0..NB {
+                        e.put(r, Self::col(k - 1, O_XB + l), -jb.a[(i, l)]);
+                    }
+                }
+                e.put(r, c0 + O_U, -jb.b[(i, 0)]);
+                e.put(r, c0 + O_U + 1, -jb.b[(i, 1)] * ts);
+                for c in 0..2 {
+                    e.put(r, c0 + O_F + c, -jb.f[(i, c)] * fs);
+                }
+                b[r] = -(jb.f[(i, 0)] * f.x + jb.f[(i, 1)] * f.y);
+            }
+        }
+        for k in 0..n {
+            let c0 = k * STAGE;
+            let r0 = n_eq + ROWS * k;
+            let u = self.lin.u[k];
+            let soft = &self.soft[k];
+            let st = &self.reference.stages[k];
+            // 0–3: input bounds ∩ trust region, on ũ.
+            let ts_steer = s.trust_steer * trust;
+            let ts_torque = s.trust_torque * trust;
+            e.put(r0, c0 + O_U, 1.0);
+            b[r0] = (self.steer_max - u[0]).min(ts_steer).max(0.0);
+            e.put(r0 + 1, c0 + O_U, -1.0);
+            b[r0 + 1] = (self.steer_max + u[0]).min(ts_steer).max(0.0);
+            e.put(r0 + 2, c0 + O_U + 1, 1.0);
+            b[r0 + 2] = ((self.torque_max - u[1]) / ts).min(ts_torque).max(0.0);
+            e.put(r0 + 3, c0 + O_U + 1, -1.0);
+            b[r0 + 3] = ((u[1] - self.torque_min) / ts).min(ts_torque).max(0.0);
+            // 4–5: steer rate.
+            let dmax = self.steer_rate * s.dt;
+            let u_prev = if k == 0 {
+                self.last_command[0]
+            } else {
+                self.lin.u[k - 1][0]
+            };
+            let dbar = u[0] - u_prev;
+            e.put(r0 + 4, c0 + O_U, 1.0);
+            e.put(r0 + 5, c0 + O_U, -1.0);
+            if k > 0 {
+                e.put(r0 + 4, Self::col(k - 1, O_U), -1.0);
+                e.put(r0 + 5, Self::col(k - 1, O_U), 1.0);
+            }
+            b[r0 + 4] = (dmax - dbar).max(0.0);
+            b[r0 + 5] = (dmax + dbar).max(0.0);
+            // 6–9: force bounds and friction cone on f̃ = f / f_scale.
+            let mu = s.contact.friction;
+            e.put(r0 + 6, c0 + O_F, -1.0);
+            b[r0 + 6] = 0.0;
+            e.put(r0 + 7, c0 + O_F, 1.0);
+            b[r0 + 7] = soft.fn_max / fs;
+            e.put(r0 + 8, c0 + O_F + 1, 1.0);
+            e.put(r0 + 8, c0 + O_F, -mu);
+            b[r0 + 8] = 0.0;
+            e.put(r0 + 9, c0 + O_F + 1, -1.0);
+            e.put(r0 + 9, c0 + O_F, -mu);
+            b[r0 + 9] = 0.0;
+            // 10: penetration law at x_{k+1}: −∇gap·δ − (f_s/k) f̃_n − s ≤ gap.
+            for j in 0..3 {
+                e.put(r0 + 10, c0 + O_XB + B_POSE[j], -soft.gap_b[j]);
+                e.put(r0 + 10, c0 + O_XT + T_POSE[j], -soft.gap_t[j]);
+            }
+            e.put(r0 + 10, c0 + O_F, -fs / s.contact.stiffness);
+            e.put(r0 + 10, c0 + O_S, -1.0);
+            b[r0 + 10] = soft.gap;
+            // 11–14: road edges and obstacles, bullet then target.
+            let rows = [
+                (soft.road_b, O_XB, B_POSE),
+                (soft.road_t, O_XT, T_POSE),
+                (soft.obs_b, O_XB, B_POSE),
+                (soft.obs_t, O_XT, T_POSE),
+            ];
+            for (i, (row, off, pose)) in rows.iter().enumerate() {
+                for (&col, &g) in pose.iter().zip(&row.grad) {
+                    e.put(r0 + 11 + i, c0 + off + col, g);
+                }
+                e.put(r0 + 11 + i, c0 + O_S, -1.0);
+                b[r0 + 11 + i] = row.rhs;
+            }
+            // 15–16: envelope on the lateral position in the target frame.
+            let xt = &self.lin.xt[k + 1];
+            let (sn, cs) = xt[2].sin_cos();
+            let gy = [sn, -cs, -soft.rel.x, -sn, cs];
+            let cols = [
+                c0 + O_XT + 6,
+                c0 + O_XT + 7,
+                c0 + O_XT + 2,
+                c0 + O_XB,
+                c0 + O_XB + 1,
+            ];
+            for j in 0..5 {
+                e.put(r0 + 15, cols[j], gy[j]);
+                e.put(r0 + 16, cols[j], -gy[j]);
+            }
+            e.put(r0 + 15, c0 + O_S, -1.0);
+            e.put(r0 + 16, c0 + O_S, -1.0);
+            let dev = soft.rel.y - st.rel_pos.y;
+            b[r0 + 15] = st.envelope_lat - dev;
+            b[r0 + 16] = st.envelope_lat + dev;
+            // 17: s ≥ 0.
+            e.put(r0 + 17, c0 + O_S, -1.0);
+            b[r0 + 17] = 0.0;
+            // 18: the compliance band's upper side: F_n/k + gap ≤ band + s, near contact
+            // only (apart, the force bound of row 7 is zero instead).
+            for j in 0..3 {
+                e.put(r0 + 18, c0 + O_XB + B_POSE[j], soft.gap_b[j]);
+                e.put(r0 + 18, c0 + O_XT + T_POSE[j], soft.gap_t[j]);
+            }
+            e.put(r0 + 18, c0 + O_F, fs / s.contact.stiffness);
+            e.put(r0 + 18, c0 + O_S, -1.0);
+            b[r0 + 18] = if soft.band {
+                s.contact.band - soft.gap
+            } else {
+                FAR
+            };
+        }
+    }
+}
+
+/// The relative heading of two headings, wrapped (for reports).
+#[must_use]
+pub fn heading_error(psi: f64, psi_ref: f64) -> f64 {
+    wrap_angle(psi - psi_ref)
+}
+
+/// A pose helper for tests and callers.
+#[must_use]
+pub fn bullet_pose(x: &BulletState) -> Pose2 {
+    Pose2::new(x[0], x[1], x[2])
+}

@@ -1,0 +1,267 @@
+//! A QP with a fixed sparsity pattern, assembled in place and solved by Clarabel.
+//!
+//! The MPC writes its matrices through an [`Emitter`]: the same code path runs once at
+//! construction in *pattern* mode (collecting `(row, col)` pairs, from which the CSC
+//! structure is built) and then at every update in *values* mode (writing each value into
+//! the slot its pair was given). The pattern can therefore never drift from the values, and
+//! an entry that is zero today stays a structural entry: Clarabel is built with presolve off
+//! and without dropping zeros, so `update_P` / `update_A` reuse its symbolic factorisation.
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+
+/// Writes matrix entries, either recording the pattern or filling values.
+pub(crate) struct Emitter<'a> {
+    mode: Mode<'a>,
+    /// Keep only the upper triangle (for P).
+    upper: bool,
+}
+
+enum Mode<'a> {
+    Pattern(&'a mut Vec<(usize, usize)>),
+    Values {
+        slots: &'a [usize],
+        nzval: &'a mut [f64],
+        next: usize,
+    },
+}
+
+impl<'a> Emitter<'a> {
+    pub(crate) fn pattern(pairs: &'a mut Vec<(usize, usize)>, upper: bool) -> Self {
+        pairs.clear();
+        Self {
+            mode: Mode::Pattern(pairs),
+            upper,
+        }
+    }
+
+    pub(crate) fn values(slots: &'a [usize], nzval: &'a mut [f64], upper: bool) -> Self {
+        nzval.fill(0.0);
+        Self {
+            mode: Mode::Values {
+                slots,
+                nzval,
+                next: 0,
+            },
+            upper,
+        }
+    }
+
+    /// Add `v` at `(r, c)` (values at the same place accumulate). For an upper-triangular
+    /// matrix, an entry below the diagonal goes to its mirror.
+    #[inline]
+    pub(crate) fn put(&mut self, r: usize, c: usize, v: f64) {
+        let (r, c) = if self.upper && r > c { (c, r) } else { (r, c) };
+        match &mut self.mode {
+            Mode::Pattern(pairs) => pairs.push((r, c)),
+            Mode::Values { slots, nzval, next } => {
+                nzval[slots[*next]] += v;
+                *next += 1;
+            }
+        }
+    }
+
+    /// Number of entries written in values mode; panics (a bug) if the pattern differs.
+    pub(crate) fn finish(self) {
+        if let Mode::Values { slots, next, .. } = self.mode {
+            assert_eq!(next, slots.len(), "QP assembly wrote a different pattern");
+        }
+    }
+}
+
+/// A CSC structure built from `(row, col)` pairs, with the slot of every pair.
+pub(crate) struct Pattern {
+    pub matrix: CscMatrix<f64>,
+    /// `slots[i]` is the index into `nzval` of the i-th emitted pair.
+    pub slots: Vec<usize>,
+}
+
+impl Pattern {
+    pub(crate) fn build(m: usize, n: usize, pairs: &[(usize, usize)]) -> Self {
+        let mut order: Vec<usize> = (0..pairs.len()).collect();
+        order.sort_by_key(|&i| (pairs[i].1, pairs[i].0));
+        let mut colptr = vec![0usize; n + 1];
+        let mut rowval = Vec::with_capacity(pairs.len());
+        let mut slots = vec![0usize; pairs.len()];
+        let mut last: Option<(usize, usize)> = None;
+        for &i in &order {
+            let (r, c) = pairs[i];
+            assert!(r < m && c < n, "QP entry ({r}, {c}) outside {m} x {n}");
+            if last != Some((r, c)) {
+                rowval.push(r);
+                colptr[c + 1] += 1;
+                last = Some((r, c));
+            }
+            slots[i] = rowval.len() - 1;
+        }
+        for c in 0..n {
+            colptr[c + 1] += colptr[c];
+        }
+        let nnz = rowval.len();
+        Self {
+            matrix: CscMatrix::new(m, n, colptr, rowval, vec![0.0; nnz]),
+            slots,
+        }
+    }
+}
+
+/// Outcome of one QP solve.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum QpStatus {
+    Solved,
+    /// Solved to Clarabel's reduced tolerances.
+    AlmostSolved,
+    MaxIterations,
+    MaxTime,
+    /// Infeasible, numerical error or lack of progress: the step is not usable.
+    Failed,
+}
+
+impl QpStatus {
+    fn from_clarabel(s: SolverStatus) -> Self {
+        match s {
+            SolverStatus::Solved => Self::Solved,
+            SolverStatus::AlmostSolved => Self::AlmostSolved,
+            SolverStatus::MaxIterations => Self::MaxIterations,
+            SolverStatus::MaxTime => Self::MaxTime,
+            _ => Self::Failed,
+        }
+    }
+
+    /// Whether the primal solution may be used as a step.
+    #[must_use]
+    pub fn usable(self) -> bool {
+        matches!(self, Self::Solved | Self::AlmostSolved)
+    }
+}
+
+/// The Clarabel solver with its data, updated in place.
+pub(crate) struct Qp {
+    pub n: usize,
+    pub m: usize,
+    solver: DefaultSolver<f64>,
+    pub p_slots: Vec<usize>,
+    pub a_slots: Vec<usize>,
+    pub p_val: Vec<f64>,
+    pub a_val: Vec<f64>,
+    pub q: Vec<f64>,
+    pub b: Vec<f64>,
+    /// The structure of P (upper triangle), for evaluating the objective.
+    p_colptr: Vec<usize>,
+    p_rowval: Vec<usize>,
+    /// A point at which [`Qp::objective_at_z`] evaluates the objective.
+    pub z: Vec<f64>,
+}
+
+/// Clarabel settings for the MPC's QPs.
+pub(crate) fn clarabel_settings(
+    s: &crate::settings::QpSettings,
+    time_limit: f64,
+) -> DefaultSettings<f64> {
+    DefaultSettings {
+        max_iter: s.max_iter,
+        time_limit,
+        verbose: false,
+        tol_gap_abs: s.tol_gap,
+        tol_gap_rel: s.tol_gap,
+        tol_feas: s.tol_feas,
+        tol_ktratio: 1e-5,
+        equilibrate_enable: false,
+        presolve_enable: false,
+        input_sparse_dropzeros: false,
+        direct_solve_method: "qdldl".to_owned(),
+        iterative_refinement_enable: s.iterative_refinement,
+        max_threads: 1,
+        ..DefaultSettings::default()
+    }
+}
+
+impl Qp {
+    /// Build the solver from the patterns (values all zero but the diagonal of P, which
+    /// Clarabel's regularisation makes harmless) and the cones: `n_eq` equality rows first,
+    /// then nonnegative rows.
+    pub(crate) fn new(
+        p: Pattern,
+        a: Pattern,
+        n_eq: usize,
+        settings: DefaultSettings<f64>,
+    ) -> Result<Self, String> {
+        let n = p.matrix.n;
+        let m = a.matrix.m;
+        let cones = [
+            SupportedConeT::ZeroConeT(n_eq),
+            SupportedConeT::NonnegativeConeT(m - n_eq),
+        ];
+        let q = vec![0.0; n];
+        let b = vec![1.0; m];
+        let p_val = p.matrix.nzval.clone();
+        let p_colptr = p.matrix.colptr.clone();
+        let p_rowval = p.matrix.rowval.clone();
+        let a_val = a.matrix.nzval.clone();
+        let solver = DefaultSolver::new(&p.matrix, &q, &a.matrix, &b, &cones, settings)
+            .map_err(|e| e.to_string())?;
+        if !solver.is_data_update_allowed() {
+            return Err("Clarabel refuses in-place data updates".to_owned());
+        }
+        Ok(Self {
+            n,
+            m,
+            solver,
+            p_slots: p.slots,
+            a_slots: a.slots,
+            p_val,
+            a_val,
+            q,
+            b,
+            p_colptr,
+            p_rowval,
+            z: vec![0.0; n],
+        })
+    }
+
+    /// Push the current values into the solver and solve (within the time limit given at
+    /// construction).
+    pub(crate) fn solve(&mut self) -> QpStatus {
+        let ok = self.solver.update_P(&self.p_val).is_ok()
+            && self.solver.update_A(&self.a_val).is_ok()
+            && self.solver.update_q(&self.q).is_ok()
+            && self.solver.update_b(&self.b).is_ok();
+        if !ok {
+            return QpStatus::Failed;
+        }
+        self.solver.solve();
+        let sol = &self.solver.solution;
+        let status = QpStatus::from_clarabel(sol.status);
+        if status.usable() && sol.x.iter().any(|v| !v.is_finite()) {
+            return QpStatus::Failed;
+        }
+        status
+    }
+
+    /// `½ zᵀ P z + qᵀ z` at `self.z`, with the current (not yet solved) data.
+    pub(crate) fn objective_at_z(&self) -> f64 {
+        let z = &self.z;
+        let mut v = 0.0;
+        for c in 0..self.n {
+            for i in self.p_colptr[c]..self.p_colptr[c + 1] {
+                let r = self.p_rowval[i];
+                let w = self.p_val[i] * z[r] * z[c];
+                v += if r == c { 0.5 * w } else { w };
+            }
+            v += self.q[c] * z[c];
+        }
+        v
+    }
+
+    pub(crate) fn x(&self) -> &[f64] {
+        &self.solver.solution.x
+    }
+
+    pub(crate) fn iterations(&self) -> u32 {
+        self.solver.solution.iterations
+    }
+
+    pub(crate) fn objective(&self) -> f64 {
+        self.solver.solution.obj_val
+    }
+}

@@ -1,0 +1,85 @@
+//! The control step allocates nothing after construction but for one block per QP that
+//! Clarabel 0.11 allocates inside its timing instrumentation: RTI and converged SCP, apart
+//! and in contact, with a road and obstacles (a counting global allocator).
+//!
+//! Clarabel's `Info::reset` calls `InnerTimer::reset`, which clears the nested timer maps
+//! (`src/timers/timers.rs`), so the first sub-timer of every solve re-creates a `HashMap`
+//! (404 bytes here). Everything of ours (linearisation, assembly, rollouts, merit) allocates
+//! nothing; the test pins the count to exactly one per QP, so that a Clarabel release that
+//! fixes this makes it fail and gets the bound tightened to zero.
+
+mod common;
+
+use common::*;
+use dynamics::road::Obstacle;
+use mpc::{MpcSettings, ScpMode};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct CountingAlloc;
+
+thread_local! {
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+// SAFETY: defers to the system allocator; only adds a thread-local counter.
+unsafe impl GlobalAlloc for CountingAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAlloc = CountingAlloc;
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(Cell::get)
+}
+
+#[test]
+fn the_control_step_allocates_only_clarabels_timer_block_per_qp() {
+    let (rx, ry) = touching_rel(0.03);
+    let situations = [
+        situation(-10.0, 3.0, 0.0, 15.0, 17.0),
+        situation(rx, ry, -0.1, 15.0, 16.0),
+        situation(-4.0, 2.5, 0.05, 15.0, 16.0),
+    ];
+    let obstacles = [Obstacle {
+        x: 130.0,
+        y: -3.5,
+        heading: 0.0,
+        vx: 10.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    }];
+    let road = road();
+    for mode in [ScpMode::Rti, ScpMode::Converged] {
+        let settings = MpcSettings {
+            mode,
+            time_budget: 10.0,
+            ..MpcSettings::default()
+        };
+        let mut m = mpc_with(settings, four_dof(&params()));
+        for (i, s) in situations.iter().enumerate() {
+            let mut inp = input(s, Some(&road));
+            inp.obstacles = &obstacles;
+            let before = allocations();
+            let out = m.solve(&inp).unwrap();
+            let n = allocations() - before;
+            let qps = out.scp_iterations as usize;
+            assert_eq!(
+                n, qps,
+                "{mode:?}, situation {i}: {n} allocations in {qps} QPs ({out:?})"
+            );
+        }
+    }
+}

@@ -1,0 +1,213 @@
+//! Behaviour of the coupled collision MPC on scripted situations.
+
+mod common;
+
+use common::*;
+use dynamics::road::Obstacle;
+use mpc::{MpcSettings, MpcStatus, ScpMode, SolveError};
+
+fn settings() -> MpcSettings {
+    MpcSettings::default()
+}
+
+#[test]
+fn the_qp_prediction_matches_the_nonlinear_rollout_and_the_error_shrinks_quadratically() {
+    // Bullet 8 m behind and to the left: no contact, a smooth linearisation. Shrinking the
+    // trust region by 4 (both below the steer-rate limit of 0.02 rad per step, so the trust
+    // region is what limits the step) shrinks the first-order model's error by more than
+    // it shrinks the step (quadratically where the step sits at the trust bound).
+    let s = situation(-8.0, 3.0, 0.0, 15.0, 17.0);
+    let mut errs = Vec::new();
+    for trust in [0.02, 0.005] {
+        let mut st = settings();
+        st.trust_steer = trust;
+        st.trust_torque = trust;
+        // Solve the QPs tightly: this test is about the model, not the solver's tolerance.
+        st.qp.tol_gap = 1e-9;
+        st.qp.tol_feas = 1e-9;
+        st.qp.iterative_refinement = true;
+        let mut m = mpc_with(st, four_dof(&params()));
+        let out = m.solve(&input(&s, None)).unwrap();
+        assert_eq!(out.status, MpcStatus::RtiStep);
+        errs.push(m.linearisation_error());
+    }
+    assert!(errs[0] < 0.05, "linearisation error {:?}", errs);
+    assert!(
+        errs[1] < errs[0] / 4.0,
+        "error does not shrink faster than the step: {errs:?}"
+    );
+    assert!(errs[1] < 5e-3, "{errs:?}");
+}
+
+#[test]
+fn with_the_vehicles_apart_no_force_is_planned() {
+    let s = situation(-12.0, 3.5, 0.0, 15.0, 16.0);
+    let mut m = mpc_with(settings(), four_dof(&params()));
+    let out = m.solve(&input(&s, Some(&road()))).unwrap();
+    assert_eq!(out.status, MpcStatus::RtiStep);
+    let plan = m.plan();
+    for k in 0..plan.len() {
+        assert!(
+            plan.pair[k].gap > 0.3,
+            "the plan closes to contact at step {k}"
+        );
+        assert_eq!(
+            plan.f[k].x, 0.0,
+            "force planned at step {k} with gap {}",
+            plan.pair[k].gap
+        );
+        assert_eq!(plan.f[k].y, 0.0);
+    }
+}
+
+#[test]
+fn in_contact_the_planned_force_stays_in_the_corridor_and_the_bullet_in_its_envelope() {
+    let (rx, ry) = touching_rel(0.04);
+    let mut s = situation(rx, ry, -0.1, 15.0, 16.0);
+    // Engaged: the default reference opens the corridor.
+    let st = &s.reference.stages[0];
+    assert!(
+        st.fn_hi > 0.0,
+        "the default reference should be engaged here: {st:?}"
+    );
+    for stage in &mut s.reference.stages {
+        stage.fn_lo = 3000.0;
+    }
+    // Converged SCP: the nonlinear rollout of the plan, not only its linearisation, must
+    // honour the contact constraints.
+    let mut settings = settings();
+    settings.mode = ScpMode::Converged;
+    settings.max_scp_iter = 20;
+    settings.time_budget = 10.0;
+    let mut m = mpc_with(settings.clone(), four_dof(&params()));
+    let out = m.solve(&input(&s, Some(&road()))).unwrap();
+    assert!(out.status != MpcStatus::QpFailure, "{out:?}");
+    eprintln!("{out:?}");
+    let plan = m.plan();
+    let c = &settings.contact;
+    let mut any_force = false;
+    for k in 0..plan.len() {
+        let f = plan.f[k];
+        let g = plan.pair[k].gap.min(plan.pair[k + 1].gap);
+        let bound = if g <= c.gap_release { c.force_max } else { 0.0 };
+        assert!(
+            f.x >= 0.0 && f.x <= bound + 1e-6,
+            "F_n {} outside [0, {bound}] at {k}",
+            f.x
+        );
+        // The compliance band, with the solver's slack tolerance of a centimetre.
+        assert!(
+            f.x <= c.stiffness * (c.band - g + 0.01),
+            "F_n {} across a gap {g} at {k}",
+            f.x
+        );
+        assert!(
+            f.y.abs() <= c.friction * f.x + 1e-6,
+            "friction cone violated at {k}: {f:?}"
+        );
+        any_force |= f.x > 100.0;
+    }
+    assert!(
+        any_force,
+        "no force planned while touching with the corridor open"
+    );
+    // The bullet's predicted lateral position in the target frame stays in the envelope
+    // (soft constraint: allow the solver's tolerance).
+    for k in 1..=plan.len() {
+        let (xt, xb) = (&plan.xt[k], &plan.xb[k]);
+        let (sn, cs) = xt[2].sin_cos();
+        let rel_y = -sn * (xb[0] - xt[6]) + cs * (xb[1] - xt[7]);
+        let st = &s.reference.stages[k - 1];
+        assert!(
+            (rel_y - st.rel_pos.y).abs() <= st.envelope_lat + 0.05,
+            "bullet outside its envelope at {k}: {rel_y} vs {} ± {}",
+            st.rel_pos.y,
+            st.envelope_lat
+        );
+    }
+}
+
+#[test]
+fn a_start_off_the_road_still_gives_a_status_and_a_finite_command() {
+    // The bullet starts 1 m beyond the left edge, an obstacle sits in its way: every
+    // constraint but the input bounds is soft, so the QP stays feasible.
+    let s = situation(-10.0, 7.5, 0.2, 15.0, 17.0);
+    let obstacles = [Obstacle {
+        x: 100.0,
+        y: 6.0,
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 2.0,
+        width: 1.0,
+    }];
+    let mut m = mpc_with(settings(), four_dof(&params()));
+    let road = road();
+    let mut inp = input(&s, Some(&road));
+    inp.obstacles = &obstacles;
+    let out = m.solve(&inp).unwrap();
+    assert_eq!(out.status, MpcStatus::RtiStep, "{out:?}");
+    assert!(out.command.iter().all(|v| v.is_finite()));
+    assert!(
+        out.max_violation > 0.5,
+        "the start violates the road: {out:?}"
+    );
+    // The plan steers back toward the road (to the right).
+    let plan = m.plan();
+    assert!(plan.u.iter().any(|u| u[0] < -0.05), "{:?}", plan.u);
+}
+
+#[test]
+fn non_finite_input_is_refused_with_a_typed_error() {
+    let s = situation(-8.0, 3.0, 0.0, 15.0, 17.0);
+    let mut m = mpc_with(settings(), four_dof(&params()));
+    let mut inp = input(&s, None);
+    let mut bad = s.target;
+    bad[3] = f64::NAN;
+    inp.target = bad;
+    assert_eq!(m.solve(&inp).unwrap_err(), SolveError::TargetState);
+    let mut inp = input(&s, None);
+    inp.last_command[1] = f64::INFINITY;
+    assert_eq!(m.solve(&inp).unwrap_err(), SolveError::LastCommand);
+}
+
+#[test]
+fn the_same_input_gives_the_same_plan() {
+    let s = situation(-8.0, 3.0, 0.0, 15.0, 17.0);
+    let run = || {
+        let mut m = mpc_with(settings(), four_dof(&params()));
+        let out = m.solve(&input(&s, Some(&road()))).unwrap();
+        (out.command, m.plan().xb.clone(), m.plan().f.clone())
+    };
+    assert_eq!(run(), run());
+}
+
+#[test]
+fn converged_mode_never_ends_with_a_worse_merit_than_rti() {
+    let s = situation(-6.0, 2.8, -0.05, 15.0, 17.0);
+    let mut merits = Vec::new();
+    for mode in [ScpMode::Rti, ScpMode::Converged] {
+        let mut st = settings();
+        st.mode = mode;
+        st.time_budget = 10.0;
+        let mut m = mpc_with(st, four_dof(&params()));
+        let out = m.solve(&input(&s, Some(&road()))).unwrap();
+        assert!(out.status != MpcStatus::QpFailure, "{out:?}");
+        merits.push(out.merit);
+        if mode == ScpMode::Converged {
+            assert!(out.scp_iterations >= 1);
+        }
+    }
+    assert!(
+        merits[1] <= merits[0] * 1.0001 + 1e-9,
+        "converged {merits:?}"
+    );
+}
+
+#[test]
+fn a_target_model_with_another_step_is_refused() {
+    let p = params();
+    let t = Box::new(dynamics::target4dof::FourDofTarget::new(&p.target, MU, 0.1));
+    let e = mpc::CoupledMpc::new(&p, MU, t, settings()).unwrap_err();
+    assert!(e.to_string().contains("0.1"), "{e}");
+}
