@@ -101,7 +101,11 @@ fn bench_surrogate(
 ) {
     let mut mpc = CoupledMpc::new(params, MU, target, MpcSettings::default()).unwrap();
     let mut i = 0;
-    c.bench_function(&format!("ctrl_step/{name}"), |b| {
+    let mut group = c.benchmark_group("ctrl_step");
+    group
+        .sample_size(60)
+        .measurement_time(std::time::Duration::from_secs(4));
+    group.bench_function(name, |b| {
         b.iter(|| {
             let r = &records[i % records.len()];
             if i % records.len() == 0 {
@@ -121,6 +125,7 @@ fn bench_surrogate(
             std::hint::black_box(mpc.solve(&input).unwrap())
         });
     });
+    group.finish();
 }
 
 fn ctrl_step(c: &mut Criterion) {
@@ -146,9 +151,5 @@ fn ctrl_step(c: &mut Criterion) {
     }
 }
 
-criterion_group! {
-    name = benches;
-    config = Criterion::default().sample_size(60).measurement_time(std::time::Duration::from_secs(4));
-    targets = ctrl_step
-}
+criterion_group!(benches, ctrl_step);
 criterion_main!(benches);
