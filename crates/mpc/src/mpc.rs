@@ -16,30 +16,70 @@ use thiserror::Error;
 
 const NT: usize = 8;
 const NB: usize = 6;
-const NX: usize = NT + NB;
-/// Columns of one stage: `[ũ (2), f̃ (2), s (1), δx_T (8), δx_B (6)]`.
-const STAGE: usize = 2 + 2 + 1 + NX;
-const O_U: usize = 0;
-const O_F: usize = 2;
-const O_S: usize = 4;
-const O_XT: usize = 5;
-const O_XB: usize = O_XT + NT;
-/// Inequality rows per stage.
-const ROWS: usize = 19;
 /// Target pose columns (X, Y, ψ) within x_T, bullet pose columns within x_B.
 const T_POSE: [usize; 3] = [6, 7, 2];
 const B_POSE: [usize; 3] = [0, 1, 2];
-/// Tracked state columns (relative to the stage's first state column).
-const TRACKED: [usize; 8] = [
-    O_XT + 6,
-    O_XT + 7,
-    O_XT + 2,
-    O_XT,
-    O_XB,
-    O_XB + 1,
-    O_XB + 2,
-    O_XB + 3,
-];
+/// Tracked state entries: X_T, Y_T, ψ_T, vx_T (within x_T), X_B, Y_B, ψ_B, vx_B (within x_B).
+const TRACKED_T: [usize; 4] = [6, 7, 2, 0];
+const TRACKED_B: [usize; 4] = [0, 1, 2, 3];
+
+/// Where the variables and rows of one stage sit in a QP.
+///
+/// Two QPs are built. The *coupled* one carries both vehicles and the contact force:
+/// columns `[ũ (2), f̃ (2), s (1), δx_T (8), δx_B (6)]`, 14 dynamics rows and 19 inequality
+/// rows per stage. The target is driven by nothing but f_c, so when no force is admissible
+/// anywhere over the horizon (every stage of the linearisation farther apart than
+/// `gap_release`) its prediction is exact and fixed: the *bullet-only* QP then drops the
+/// target's states and the forces, `[ũ (2), s (1), δx_B (6)]`, 6 dynamics rows and 12
+/// inequality rows per stage, about a third of the work.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Layout {
+    coupled: bool,
+    stage: usize,
+    o_u: usize,
+    o_f: usize,
+    o_s: usize,
+    o_xt: usize,
+    o_xb: usize,
+    dyn_rows: usize,
+    rows: usize,
+}
+
+const COUPLED: Layout = Layout {
+    coupled: true,
+    stage: 19,
+    o_u: 0,
+    o_f: 2,
+    o_s: 4,
+    o_xt: 5,
+    o_xb: 13,
+    dyn_rows: NT + NB,
+    rows: 19,
+};
+
+const BULLET_ONLY: Layout = Layout {
+    coupled: false,
+    stage: 9,
+    o_u: 0,
+    o_f: usize::MAX,
+    o_s: 2,
+    o_xt: usize::MAX,
+    o_xb: 3,
+    dyn_rows: NB,
+    rows: 12,
+};
+
+impl Layout {
+    fn columns(&self, n: usize) -> usize {
+        self.stage * n
+    }
+    fn row_count(&self, n: usize) -> usize {
+        (self.dyn_rows + self.rows) * n
+    }
+    fn col(&self, k: usize, off: usize) -> usize {
+        k * self.stage + off
+    }
+}
 /// A right-hand side that makes a row inactive.
 const FAR: f64 = 1.0e4;
 
@@ -217,7 +257,11 @@ pub struct CoupledMpc {
     model_error: f64,
     stage_error: Vec<(f64, usize)>,
     soft: Vec<SoftRows>,
-    qp: Qp,
+    /// The coupled QP and the bullet-only QP (see [`Layout`]).
+    qp_coupled: Qp,
+    qp_bullet: Qp,
+    /// Whether the last QP was the coupled one.
+    coupled: bool,
     clock: Box<dyn Clock + Send>,
 }
 
@@ -226,14 +270,15 @@ impl std::fmt::Debug for CoupledMpc {
         f.debug_struct("CoupledMpc")
             .field("horizon", &self.n)
             .field("target_model", &self.target.name())
-            .field("qp_columns", &self.qp.n)
-            .field("qp_rows", &self.qp.m)
+            .field("qp_coupled", &(self.qp_coupled.n, self.qp_coupled.m))
+            .field("qp_bullet_only", &(self.qp_bullet.n, self.qp_bullet.m))
             .finish_non_exhaustive()
     }
 }
 
 /// Everything the assembly reads (borrowed apart from the QP buffers it writes).
 struct AssemblyView<'a> {
+    layout: Layout,
     s: &'a MpcSettings,
     lin: &'a Plan,
     soft: &'a [SoftRows],
@@ -293,7 +338,9 @@ impl CoupledMpc {
             model_error: 0.0,
             stage_error: vec![(0.0, 0); n],
             soft: vec![SoftRows::default(); n],
-            qp: Self::build_qp(&settings, n)?,
+            qp_coupled: Self::build_qp(&settings, n, COUPLED)?,
+            qp_bullet: Self::build_qp(&settings, n, BULLET_ONLY)?,
+            coupled: true,
             clock: Box::new(MonotonicClock::new()),
             settings,
         };
@@ -325,10 +372,36 @@ impl CoupledMpc {
         self.target.param_count()
     }
 
-    /// QP size: (columns, rows).
+    /// QP sizes (columns, rows): the coupled QP and the bullet-only QP.
     #[must_use]
-    pub fn qp_size(&self) -> (usize, usize) {
-        (self.qp.n, self.qp.m)
+    pub fn qp_sizes(&self) -> ((usize, usize), (usize, usize)) {
+        (
+            (self.qp_coupled.n, self.qp_coupled.m),
+            (self.qp_bullet.n, self.qp_bullet.m),
+        )
+    }
+
+    /// Whether the last control step's QP carried the target and the contact force (false:
+    /// no force was admissible over the horizon and the bullet-only QP was solved).
+    #[must_use]
+    pub fn last_qp_coupled(&self) -> bool {
+        self.coupled
+    }
+
+    fn qp(&self) -> &Qp {
+        if self.coupled {
+            &self.qp_coupled
+        } else {
+            &self.qp_bullet
+        }
+    }
+
+    fn layout(&self) -> Layout {
+        if self.coupled {
+            COUPLED
+        } else {
+            BULLET_ONLY
+        }
     }
 
     /// The plan of the last control step (inputs, forces, both vehicles' predicted states).
@@ -342,11 +415,12 @@ impl CoupledMpc {
         self.have_prev = false;
     }
 
-    fn build_qp(settings: &MpcSettings, n: usize) -> Result<Qp, MpcError> {
+    fn build_qp(settings: &MpcSettings, n: usize, layout: Layout) -> Result<Qp, MpcError> {
         let dummy = Plan::new(n);
         let soft = vec![SoftRows::default(); n];
         let reference = Reference::new(n);
         let view = AssemblyView {
+            layout,
             s: settings,
             lin: &dummy,
             soft: &soft,
@@ -359,7 +433,7 @@ impl CoupledMpc {
             t_scale: 1.0,
             f_scale: 1.0,
         };
-        let (ncol, m) = (STAGE * n, (NX + ROWS) * n);
+        let (ncol, m) = (layout.columns(n), layout.row_count(n));
         let mut q = vec![0.0; ncol];
         let mut b = vec![0.0; m];
         let mut pairs = Vec::new();
@@ -368,30 +442,34 @@ impl CoupledMpc {
         view.constraints(&mut Emitter::pattern(&mut pairs, false), &mut b);
         let a = Pattern::build(m, ncol, &pairs);
         let cs = clarabel_settings(&settings.qp, settings.time_budget);
-        Qp::new(p, a, NX * n, cs).map_err(MpcError::Solver)
+        Qp::new(p, a, layout.dyn_rows * n, cs).map_err(MpcError::Solver)
     }
 
-    /// Solve once on a neutral situation so that every lazily sized buffer (Clarabel's
-    /// included) reaches its working size before the first real control step.
+    /// Solve both QPs once (vehicles apart: bullet-only; overlapping: coupled) so that
+    /// every lazily sized buffer, Clarabel's included, reaches its working size before the
+    /// first real control step.
     fn warm_up(&mut self) {
         let reference = Reference::new(self.n);
-        let mut xt = TargetState::zeros();
-        xt[0] = 10.0;
-        let mut xb = BulletState::zeros();
-        xb[0] = -20.0;
-        xb[3] = 10.0;
-        let input = MpcInput {
-            time: 0.0,
-            target: xt,
-            bullet: xb,
-            target_input: TargetInput::zeros(),
-            last_command: BulletInput::zeros(),
-            road: None,
-            obstacles: &[],
-            reference: &reference,
-        };
-        let _ = self.solve(&input);
-        self.have_prev = false;
+        for gap_x in [-30.0, -4.0] {
+            let mut xt = TargetState::zeros();
+            xt[0] = 10.0;
+            let mut xb = BulletState::zeros();
+            xb[0] = gap_x;
+            xb[1] = 1.5;
+            xb[3] = 10.0;
+            let input = MpcInput {
+                time: 0.0,
+                target: xt,
+                bullet: xb,
+                target_input: TargetInput::zeros(),
+                last_command: BulletInput::zeros(),
+                road: None,
+                obstacles: &[],
+                reference: &reference,
+            };
+            let _ = self.solve(&input);
+            self.have_prev = false;
+        }
     }
 
     /// One control step.
@@ -415,6 +493,7 @@ impl CoupledMpc {
         self.rollout_lin(input, ctx_force);
         self.linearise_soft(input);
         times.linearise += self.clock.now() - tl;
+        self.coupled = self.soft.iter().any(|r| r.band);
         let mut merit_lin = self.merit(&self.lin, input).0;
 
         let max_iter = match self.settings.mode {
@@ -442,11 +521,15 @@ impl CoupledMpc {
             let ta = self.clock.now();
             self.assemble(input, trust);
             times.assemble += self.clock.now() - ta;
-            let obj_lin = self.objective_at_lin();
+            let obj_lin = self.objective_at_lin(input.reference);
             let tq = self.clock.now();
-            let qs = self.qp.solve();
+            let qs = if self.coupled {
+                self.qp_coupled.solve()
+            } else {
+                self.qp_bullet.solve()
+            };
             times.qp += self.clock.now() - tq;
-            qp_iterations += self.qp.iterations();
+            qp_iterations += self.qp().iterations();
             if !qs.usable() {
                 if qs == QpStatus::MaxTime {
                     status = MpcStatus::TimeBudget;
@@ -457,13 +540,16 @@ impl CoupledMpc {
             // Candidate: the QP's inputs and forces, rolled out through the nonlinear models.
             let tl = self.clock.now();
             self.candidate_from_qp();
-            self.rollout_cand(input, ctx_force);
+            // RTI never linearises at the candidate (the next step re-linearises from the
+            // new measurement), so its rollout skips the Jacobians.
+            let jac = self.settings.mode == ScpMode::Converged;
+            self.rollout_cand(input, ctx_force, jac);
             self.model_error = self.qp_model_error();
             times.linearise += self.clock.now() - tl;
             let merit_cand = self.merit(&self.cand, input).0;
             // The QP models the merit's change: its objective at the linearisation point
             // (zero step, slacks at their smallest feasible value) minus at the solution.
-            let predicted = obj_lin - self.qp.objective();
+            let predicted = obj_lin - self.qp().objective();
             let step = self.step_size();
             if self.settings.mode == ScpMode::Rti {
                 self.lin.copy_from(&self.cand);
@@ -478,6 +564,7 @@ impl CoupledMpc {
                 accepted_any = true;
                 let tl = self.clock.now();
                 self.linearise_soft(input);
+                self.coupled = self.soft.iter().any(|r| r.band);
                 times.linearise += self.clock.now() - tl;
                 if step < self.settings.step_tol * trust
                     || predicted.abs() < 1e-6 * (1.0 + merit_lin.abs())
@@ -597,7 +684,7 @@ impl CoupledMpc {
         rollout(&ctx, self.target.as_mut(), &mut self.lin, true);
     }
 
-    fn rollout_cand(&mut self, input: &MpcInput<'_>, (fm, rel, mu): (f64, f64, f64)) {
+    fn rollout_cand(&mut self, input: &MpcInput<'_>, (fm, rel, mu): (f64, f64, f64), jac: bool) {
         let ctx = RolloutCtx {
             bullet: &self.bullet,
             shapes: &self.shapes,
@@ -608,19 +695,28 @@ impl CoupledMpc {
         };
         self.cand.xt[0] = self.lin.xt[0];
         self.cand.xb[0] = self.lin.xb[0];
-        rollout(&ctx, self.target.as_mut(), &mut self.cand, true);
+        rollout(&ctx, self.target.as_mut(), &mut self.cand, jac);
     }
 
     /// Inputs and forces of the QP solution around `lin`.
     fn candidate_from_qp(&mut self) {
-        let x = self.qp.x();
+        let l = self.layout();
+        let x = if self.coupled {
+            self.qp_coupled.x()
+        } else {
+            self.qp_bullet.x()
+        };
         for k in 0..self.n {
-            let c = k * STAGE;
+            let c = k * l.stage;
             self.cand.u[k] = BulletInput::new(
-                self.lin.u[k][0] + x[c + O_U],
-                self.lin.u[k][1] + self.t_scale * x[c + O_U + 1],
+                self.lin.u[k][0] + x[c + l.o_u],
+                self.lin.u[k][1] + self.t_scale * x[c + l.o_u + 1],
             );
-            self.cand.f[k] = Vec2::new(self.f_scale * x[c + O_F], self.f_scale * x[c + O_F + 1]);
+            self.cand.f[k] = if l.coupled {
+                Vec2::new(self.f_scale * x[c + l.o_f], self.f_scale * x[c + l.o_f + 1])
+            } else {
+                Vec2::zeros()
+            };
         }
     }
 
@@ -639,20 +735,26 @@ impl CoupledMpc {
     }
 
     fn qp_model_error(&mut self) -> f64 {
-        let x = self.qp.x();
+        let l = self.layout();
+        let x = if self.coupled {
+            self.qp_coupled.x()
+        } else {
+            self.qp_bullet.x()
+        };
         let mut err: f64 = 0.0;
         for k in 0..self.n {
-            let c0 = k * STAGE;
+            let c0 = k * l.stage;
             let mut worst = (0.0, 0);
             for i in 0..NT {
-                let pred = self.lin.xt[k + 1][i] + x[c0 + O_XT + i];
+                let dx = if l.coupled { x[c0 + l.o_xt + i] } else { 0.0 };
+                let pred = self.lin.xt[k + 1][i] + dx;
                 let e = (pred - self.cand.xt[k + 1][i]).abs();
                 if e > worst.0 {
                     worst = (e, i);
                 }
             }
             for i in 0..NB {
-                let pred = self.lin.xb[k + 1][i] + x[c0 + O_XB + i];
+                let pred = self.lin.xb[k + 1][i] + x[c0 + l.o_xb + i];
                 let e = (pred - self.cand.xb[k + 1][i]).abs();
                 if e > worst.0 {
                     worst = (e, NT + i);
@@ -666,13 +768,14 @@ impl CoupledMpc {
 
     /// Size of the QP's input step relative to the trust region (∞-norm).
     fn step_size(&self) -> f64 {
-        let x = self.qp.x();
+        let l = self.layout();
+        let x = self.qp().x();
         let mut s: f64 = 0.0;
         for k in 0..self.n {
-            let c = k * STAGE;
+            let c = k * l.stage;
             s = s
-                .max(x[c + O_U].abs() / self.settings.trust_steer)
-                .max(x[c + O_U + 1].abs() / self.settings.trust_torque);
+                .max(x[c + l.o_u].abs() / self.settings.trust_steer)
+                .max(x[c + l.o_u + 1].abs() / self.settings.trust_torque);
         }
         s
     }
@@ -717,6 +820,7 @@ impl CoupledMpc {
 
     fn assemble(&mut self, input: &MpcInput<'_>, trust: f64) {
         let view = AssemblyView {
+            layout: self.layout(),
             s: &self.settings,
             lin: &self.lin,
             soft: &self.soft,
@@ -729,7 +833,11 @@ impl CoupledMpc {
             t_scale: self.t_scale,
             f_scale: self.f_scale,
         };
-        let qp = &mut self.qp;
+        let qp = if self.coupled {
+            &mut self.qp_coupled
+        } else {
+            &mut self.qp_bullet
+        };
         let mut e = Emitter::values(&qp.p_slots, &mut qp.p_val, true);
         view.cost(&mut e, &mut qp.q);
         e.finish();
@@ -739,27 +847,41 @@ impl CoupledMpc {
     }
 
     /// The QP objective at the linearisation point: zero steps, the forces of `lin`, each
-    /// slack at the largest linearised violation of its stage.
-    fn objective_at_lin(&mut self) -> f64 {
-        let n_eq = NX * self.n;
-        self.qp.z.fill(0.0);
+    /// slack at the largest linearised violation of its stage (the same rows the assembly
+    /// writes, evaluated at a zero step).
+    fn objective_at_lin(&mut self, reference: &Reference) -> f64 {
+        let l = self.layout();
+        let c = &self.settings.contact;
+        let qp = if self.coupled {
+            &mut self.qp_coupled
+        } else {
+            &mut self.qp_bullet
+        };
+        qp.z.fill(0.0);
         for k in 0..self.n {
-            let c0 = k * STAGE;
-            self.qp.z[c0 + O_F] = self.lin.f[k].x / self.f_scale;
-            self.qp.z[c0 + O_F + 1] = self.lin.f[k].y / self.f_scale;
-            // Soft rows 10–16 read `… − s ≤ b`: at a zero step the slack must cover the
-            // force term of row 10 and every negative right-hand side.
-            let r0 = n_eq + ROWS * k;
-            let mut s: f64 = 0.0;
-            for i in 11..17 {
-                s = s.max(-self.qp.b[r0 + i]);
+            let c0 = k * l.stage;
+            let row = &self.soft[k];
+            let f = self.lin.f[k];
+            let f_over_k = if l.coupled { f.x / c.stiffness } else { 0.0 };
+            if l.coupled {
+                qp.z[c0 + l.o_f] = f.x / self.f_scale;
+                qp.z[c0 + l.o_f + 1] = f.y / self.f_scale;
             }
-            let f_over_k = self.lin.f[k].x / self.settings.contact.stiffness;
-            s = s.max(-self.qp.b[r0 + 10] - f_over_k);
-            s = s.max(f_over_k - self.qp.b[r0 + 18]);
-            self.qp.z[c0 + O_S] = s.max(0.0);
+            let st = &reference.stages[k];
+            let dev = row.rel.y - st.rel_pos.y;
+            let mut s: f64 = 0.0;
+            s = s.max(-row.gap - f_over_k);
+            s = s.max(-row.road_b.rhs).max(-row.obs_b.rhs);
+            s = s.max(dev.abs() - st.envelope_lat);
+            if l.coupled {
+                s = s.max(-row.road_t.rhs).max(-row.obs_t.rhs);
+                if row.band {
+                    s = s.max(f_over_k + row.gap - c.band);
+                }
+            }
+            qp.z[c0 + l.o_s] = s.max(0.0);
         }
-        self.qp.objective_at_z()
+        qp.objective_at_z()
     }
 
     /// Merit of a plan: smooth cost + penalty · Σ_k (largest soft violation at step k).
@@ -907,26 +1029,24 @@ fn check_input(input: &MpcInput<'_>, n: usize) -> Result<(), SolveError> {
 }
 
 impl AssemblyView<'_> {
-    fn col(k: usize, off: usize) -> usize {
-        k * STAGE + off
-    }
-
-    /// P (upper triangle) and q. Every `put` is unconditional: the pattern is fixed.
+    /// P (upper triangle) and q. Every `put` is unconditional for a given layout: the
+    /// pattern is fixed.
     fn cost(&self, e: &mut Emitter<'_>, q: &mut [f64]) {
+        let l = self.layout;
         let n = self.lin.len();
         let w = &self.s.weights;
         let r = self.reference;
         q.fill(0.0);
         let prox = 2.0 * w.proximal;
         for k in 0..n {
-            let c0 = k * STAGE;
+            let c0 = k * l.stage;
             let st = &r.stages[k];
             let (xt, xb) = (&self.lin.xt[k + 1], &self.lin.xb[k + 1]);
-            // --- Tracking residuals r_i = r̄_i + Σ c_ij δ_j over TRACKED columns.
+            // --- Tracking residuals r_i = r̄_i + Σ c_ij δ_j over the tracked entries
+            // X_T, Y_T, ψ_T, vx_T, X_B, Y_B, ψ_B, vx_B.
             let (sn, cs) = xt[2].sin_cos();
             let d = Vec2::new(xb[0] - xt[6], xb[1] - xt[7]);
             let rel = Vec2::new(cs * d.x + sn * d.y, -sn * d.x + cs * d.y);
-            // Columns: XT, YT, ψT, vxT, XB, YB, ψB, vxB.
             let jac: [[f64; 8]; 4] = [
                 [-cs, -sn, rel.y, 0.0, cs, sn, 0.0, 0.0],
                 [sn, -cs, -rel.x, 0.0, -sn, cs, 0.0, 0.0],
@@ -959,23 +1079,35 @@ impl AssemblyView<'_> {
                 h[3][3] += 2.0 * wt * w.target_speed;
                 g[3] += 2.0 * wt * w.target_speed * xt[0];
             }
-            for a in 0..8 {
-                q[c0 + TRACKED[a]] += g[a];
+            let mut cols = [0usize; 8];
+            for i in 0..4 {
+                cols[i] = c0 + l.o_xt.wrapping_add(TRACKED_T[i]);
+                cols[4 + i] = c0 + l.o_xb + TRACKED_B[i];
+            }
+            // The bullet-only QP holds the target fixed: only the bullet's entries.
+            let first = if l.coupled { 0 } else { 4 };
+            for a in first..8 {
+                q[cols[a]] += g[a];
                 for b in a..8 {
-                    e.put(c0 + TRACKED[a], c0 + TRACKED[b], h[a][b]);
+                    e.put(cols[a], cols[b], h[a][b]);
                 }
             }
-            // vy_T (terminal speed) and the proximal term on every state column.
-            let vy_t = c0 + O_XT + 1;
-            let wvy = if k == n - 1 {
-                2.0 * w.target * r.target_weight * w.target_speed
-            } else {
-                0.0
-            };
-            e.put(vy_t, vy_t, wvy);
-            q[vy_t] += wvy * xt[1];
-            for j in 0..NX {
-                e.put(c0 + O_XT + j, c0 + O_XT + j, prox);
+            if l.coupled {
+                // vy_T (terminal speed) and the proximal term on the target's states.
+                let vy_t = c0 + l.o_xt + 1;
+                let wvy = if k == n - 1 {
+                    2.0 * w.target * r.target_weight * w.target_speed
+                } else {
+                    0.0
+                };
+                e.put(vy_t, vy_t, wvy);
+                q[vy_t] += wvy * xt[1];
+                for j in 0..NT {
+                    e.put(c0 + l.o_xt + j, c0 + l.o_xt + j, prox);
+                }
+            }
+            for j in 0..NB {
+                e.put(c0 + l.o_xb + j, c0 + l.o_xb + j, prox);
             }
             // --- Inputs: effort, rate (coupled to the previous stage), proximal.
             let u = self.lin.u[k];
@@ -988,7 +1120,7 @@ impl AssemblyView<'_> {
             let wu = [w.steer, w.torque];
             let wr = [w.steer_rate, w.torque_rate];
             for i in 0..2 {
-                let col = c0 + O_U + i;
+                let col = c0 + l.o_u + i;
                 let ubar = u[i] / scales[i];
                 let dbar = (u[i] - u_prev[i]) / scales[i];
                 // Effort wu (ū + ũ)²; rate wr (ū_k + ũ_k − ū_{k−1} − ũ_{k−1})².
@@ -1001,23 +1133,25 @@ impl AssemblyView<'_> {
                 }
                 e.put(col, col, diag);
                 if k > 0 {
-                    e.put(Self::col(k - 1, O_U + i), col, -2.0 * wr[i]);
+                    e.put(l.col(k - 1, l.o_u + i), col, -2.0 * wr[i]);
                 }
             }
-            // --- Force: corridor (Gauss–Newton on the squared distance) and proximal.
-            let f = self.lin.f[k];
-            let fs = self.f_scale;
-            let proj = f.x.clamp(st.fn_lo, st.fn_hi);
-            let outside = if (f.x - proj).abs() > 0.0 { 1.0 } else { 0.0 };
-            let wc = 2.0 * w.corridor * outside;
-            let fcol = c0 + O_F;
-            e.put(fcol, fcol, wc + prox);
-            q[fcol] += -wc * proj / fs - prox * f.x / fs;
-            e.put(fcol + 1, fcol + 1, prox);
-            q[fcol + 1] += -prox * f.y / fs;
+            if l.coupled {
+                // --- Force: corridor (Gauss–Newton on the squared distance), proximal.
+                let f = self.lin.f[k];
+                let fs = self.f_scale;
+                let proj = f.x.clamp(st.fn_lo, st.fn_hi);
+                let outside = if (f.x - proj).abs() > 0.0 { 1.0 } else { 0.0 };
+                let wc = 2.0 * w.corridor * outside;
+                let fcol = c0 + l.o_f;
+                e.put(fcol, fcol, wc + prox);
+                q[fcol] += -wc * proj / fs - prox * f.x / fs;
+                e.put(fcol + 1, fcol + 1, prox);
+                q[fcol + 1] += -prox * f.y / fs;
+            }
             // --- Slack: exact L1 penalty plus a little curvature.
-            e.put(c0 + O_S, c0 + O_S, prox);
-            q[c0 + O_S] += w.penalty;
+            e.put(c0 + l.o_s, c0 + l.o_s, prox);
+            q[c0 + l.o_s] += w.penalty;
         }
     }
 
@@ -1027,65 +1161,96 @@ impl AssemblyView<'_> {
 
     /// A and b: dynamics (equalities) then the inequality rows of every stage.
     fn constraints_trust(&self, e: &mut Emitter<'_>, b: &mut [f64], trust: f64) {
+        let l = self.layout;
         let n = self.lin.len();
         let s = self.s;
         let fs = self.f_scale;
         let ts = self.t_scale;
-        let n_eq = NX * n;
+        let n_eq = l.dyn_rows * n;
         for k in 0..n {
-            let c0 = k * STAGE;
-            let r0 = NX * k;
-            let jt = &self.lin.jt[k];
+            let c0 = k * l.stage;
+            let mut r = l.dyn_rows * k;
             let jb = &self.lin.jb[k];
             let f = self.lin.f[k];
-            // Target rows.
-            for i in 0..NT {
-                e.put(r0 + i, c0 + O_XT + i, 1.0);
-                if k > 0 {
-                    for l in 0..NT {
-                        e.put(r0 + i, Self::col(k - 1, O_XT + l), -jt.a[(i, l)]);
+            if l.coupled {
+                let jt = &self.lin.jt[k];
+                for i in 0..NT {
+                    e.put(r, c0 + l.o_xt + i, 1.0);
+                    if k > 0 {
+                        for j in 0..NT {
+                            e.put(r, l.col(k - 1, l.o_xt + j), -jt.a[(i, j)]);
+                        }
                     }
+                    for c in 0..2 {
+                        e.put(r, c0 + l.o_f + c, -jt.f[(i, c)] * fs);
+                    }
+                    b[r] = -(jt.f[(i, 0)] * f.x + jt.f[(i, 1)] * f.y);
+                    r += 1;
                 }
-                for c in 0..2 {
-                    e.put(r0 + i, c0 + O_F + c, -jt.f[(i, c)] * fs);
-                }
-                b[r0 + i] = -(jt.f[(i, 0)] * f.x + jt.f[(i, 1)] * f.y);
             }
-            // Bullet rows.
             for i in 0..NB {
-                let r = r0 + NT + i;
-                e.put(r, c0 + O_XB + i, 1.0);
+                e.put(r, c0 + l.o_xb + i, 1.0);
                 if k > 0 {
-                    for l in 0..NB {
-                        e.put(r, Self::col(k - 1, O_XB + l), -jb.a[(i, l)]);
+                    for j in 0..NB {
+                        e.put(r, l.col(k - 1, l.o_xb + j), -jb.a[(i, j)]);
                     }
                 }
-                e.put(r, c0 + O_U, -jb.b[(i, 0)]);
-                e.put(r, c0 + O_U + 1, -jb.b[(i, 1)] * ts);
-                for c in 0..2 {
-                    e.put(r, c0 + O_F + c, -jb.f[(i, c)] * fs);
+                e.put(r, c0 + l.o_u, -jb.b[(i, 0)]);
+                e.put(r, c0 + l.o_u + 1, -jb.b[(i, 1)] * ts);
+                if l.coupled {
+                    for c in 0..2 {
+                        e.put(r, c0 + l.o_f + c, -jb.f[(i, c)] * fs);
+                    }
+                    b[r] = -(jb.f[(i, 0)] * f.x + jb.f[(i, 1)] * f.y);
+                } else {
+                    b[r] = 0.0;
                 }
-                b[r] = -(jb.f[(i, 0)] * f.x + jb.f[(i, 1)] * f.y);
+                r += 1;
             }
         }
         for k in 0..n {
-            let c0 = k * STAGE;
-            let r0 = n_eq + ROWS * k;
+            let c0 = k * l.stage;
+            let mut r = n_eq + l.rows * k;
             let u = self.lin.u[k];
             let soft = &self.soft[k];
             let st = &self.reference.stages[k];
-            // 0–3: input bounds ∩ trust region, on ũ.
-            let ts_steer = s.trust_steer * trust;
-            let ts_torque = s.trust_torque * trust;
-            e.put(r0, c0 + O_U, 1.0);
-            b[r0] = (self.steer_max - u[0]).min(ts_steer).max(0.0);
-            e.put(r0 + 1, c0 + O_U, -1.0);
-            b[r0 + 1] = (self.steer_max + u[0]).min(ts_steer).max(0.0);
-            e.put(r0 + 2, c0 + O_U + 1, 1.0);
-            b[r0 + 2] = ((self.torque_max - u[1]) / ts).min(ts_torque).max(0.0);
-            e.put(r0 + 3, c0 + O_U + 1, -1.0);
-            b[r0 + 3] = ((u[1] - self.torque_min) / ts).min(ts_torque).max(0.0);
-            // 4–5: steer rate.
+            let o_s = c0 + l.o_s;
+            let mut row =
+                |e: &mut Emitter<'_>, b: &mut [f64], entries: &[(usize, f64)], rhs: f64| {
+                    for &(c, v) in entries {
+                        e.put(r, c, v);
+                    }
+                    b[r] = rhs;
+                    r += 1;
+                };
+            // Input bounds ∩ trust region, on ũ.
+            let (ts_steer, ts_torque) = (s.trust_steer * trust, s.trust_torque * trust);
+            let (cu, ct) = (c0 + l.o_u, c0 + l.o_u + 1);
+            row(
+                e,
+                b,
+                &[(cu, 1.0)],
+                (self.steer_max - u[0]).min(ts_steer).max(0.0),
+            );
+            row(
+                e,
+                b,
+                &[(cu, -1.0)],
+                (self.steer_max + u[0]).min(ts_steer).max(0.0),
+            );
+            row(
+                e,
+                b,
+                &[(ct, 1.0)],
+                ((self.torque_max - u[1]) / ts).min(ts_torque).max(0.0),
+            );
+            row(
+                e,
+                b,
+                &[(ct, -1.0)],
+                ((u[1] - self.torque_min) / ts).min(ts_torque).max(0.0),
+            );
+            // Steer rate.
             let dmax = self.steer_rate * s.dt;
             let u_prev = if k == 0 {
                 self.last_command[0]
@@ -1093,84 +1258,109 @@ impl AssemblyView<'_> {
                 self.lin.u[k - 1][0]
             };
             let dbar = u[0] - u_prev;
-            e.put(r0 + 4, c0 + O_U, 1.0);
-            e.put(r0 + 5, c0 + O_U, -1.0);
-            if k > 0 {
-                e.put(r0 + 4, Self::col(k - 1, O_U), -1.0);
-                e.put(r0 + 5, Self::col(k - 1, O_U), 1.0);
-            }
-            b[r0 + 4] = (dmax - dbar).max(0.0);
-            b[r0 + 5] = (dmax + dbar).max(0.0);
-            // 6–9: force bounds and friction cone on f̃ = f / f_scale.
-            let mu = s.contact.friction;
-            e.put(r0 + 6, c0 + O_F, -1.0);
-            b[r0 + 6] = 0.0;
-            e.put(r0 + 7, c0 + O_F, 1.0);
-            b[r0 + 7] = soft.fn_max / fs;
-            e.put(r0 + 8, c0 + O_F + 1, 1.0);
-            e.put(r0 + 8, c0 + O_F, -mu);
-            b[r0 + 8] = 0.0;
-            e.put(r0 + 9, c0 + O_F + 1, -1.0);
-            e.put(r0 + 9, c0 + O_F, -mu);
-            b[r0 + 9] = 0.0;
-            // 10: penetration law at x_{k+1}: −∇gap·δ − (f_s/k) f̃_n − s ≤ gap.
+            let prev = l.col(k.saturating_sub(1), l.o_u);
+            let couple = if k > 0 { 1.0 } else { 0.0 };
+            row(e, b, &[(cu, 1.0), (prev, -couple)], (dmax - dbar).max(0.0));
+            row(e, b, &[(cu, -1.0), (prev, couple)], (dmax + dbar).max(0.0));
+            // Gap rows on the poses (the target's only in the coupled QP).
+            let mut gap_entries = [(0usize, 0.0); 8];
             for j in 0..3 {
-                e.put(r0 + 10, c0 + O_XB + B_POSE[j], -soft.gap_b[j]);
-                e.put(r0 + 10, c0 + O_XT + T_POSE[j], -soft.gap_t[j]);
+                gap_entries[j] = (c0 + l.o_xb + B_POSE[j], soft.gap_b[j]);
+                gap_entries[3 + j] = if l.coupled {
+                    (c0 + l.o_xt + T_POSE[j], soft.gap_t[j])
+                } else {
+                    (o_s, 0.0)
+                };
             }
-            e.put(r0 + 10, c0 + O_F, -fs / s.contact.stiffness);
-            e.put(r0 + 10, c0 + O_S, -1.0);
-            b[r0 + 10] = soft.gap;
-            // 11–14: road edges and obstacles, bullet then target.
-            let rows = [
-                (soft.road_b, O_XB, B_POSE),
-                (soft.road_t, O_XT, T_POSE),
-                (soft.obs_b, O_XB, B_POSE),
-                (soft.obs_t, O_XT, T_POSE),
-            ];
-            for (i, (row, off, pose)) in rows.iter().enumerate() {
-                for (&col, &g) in pose.iter().zip(&row.grad) {
-                    e.put(r0 + 11 + i, c0 + off + col, g);
+            let neg = |v: &[(usize, f64)]| {
+                let mut out = [(0usize, 0.0); 8];
+                for (o, &(c, x)) in out.iter_mut().zip(v) {
+                    *o = (c, -x);
                 }
-                e.put(r0 + 11 + i, c0 + O_S, -1.0);
-                b[r0 + 11 + i] = row.rhs;
+                out
+            };
+            if l.coupled {
+                let (cn, cf) = (c0 + l.o_f, c0 + l.o_f + 1);
+                let mu = s.contact.friction;
+                // Force bounds and friction cone on f̃ = f / f_scale.
+                row(e, b, &[(cn, -1.0)], 0.0);
+                row(e, b, &[(cn, 1.0)], soft.fn_max / fs);
+                row(e, b, &[(cf, 1.0), (cn, -mu)], 0.0);
+                row(e, b, &[(cf, -1.0), (cn, -mu)], 0.0);
+                // Penetration law at x_{k+1}: −∇gap·δ − (f_s/k) f̃_n − s ≤ gap.
+                let mut ent = neg(&gap_entries);
+                ent[6] = (cn, -fs / s.contact.stiffness);
+                ent[7] = (o_s, -1.0);
+                row(e, b, &ent, soft.gap);
+                // Compliance band's upper side, near contact only:
+                // F_n/k + gap ≤ band + s.
+                let mut ent = gap_entries;
+                ent[6] = (cn, fs / s.contact.stiffness);
+                ent[7] = (o_s, -1.0);
+                let rhs = if soft.band {
+                    s.contact.band - soft.gap
+                } else {
+                    FAR
+                };
+                row(e, b, &ent, rhs);
+            } else {
+                // No force: the bullet may not run into the (fixed) target.
+                let mut ent = neg(&gap_entries[..3]);
+                ent[3] = (o_s, -1.0);
+                row(e, b, &ent[..4], soft.gap);
             }
-            // 15–16: envelope on the lateral position in the target frame.
+            // Road edges and obstacles, bullet then target.
+            let pose_row = |row: &EdgeRowC, off: usize, pose: [usize; 3]| {
+                [
+                    (c0 + off + pose[0], row.grad[0]),
+                    (c0 + off + pose[1], row.grad[1]),
+                    (c0 + off + pose[2], row.grad[2]),
+                    (o_s, -1.0),
+                ]
+            };
+            row(
+                e,
+                b,
+                &pose_row(&soft.road_b, l.o_xb, B_POSE),
+                soft.road_b.rhs,
+            );
+            row(e, b, &pose_row(&soft.obs_b, l.o_xb, B_POSE), soft.obs_b.rhs);
+            if l.coupled {
+                row(
+                    e,
+                    b,
+                    &pose_row(&soft.road_t, l.o_xt, T_POSE),
+                    soft.road_t.rhs,
+                );
+                row(e, b, &pose_row(&soft.obs_t, l.o_xt, T_POSE), soft.obs_t.rhs);
+            }
+            // Envelope on the lateral position in the target frame.
             let xt = &self.lin.xt[k + 1];
             let (sn, cs) = xt[2].sin_cos();
-            let gy = [sn, -cs, -soft.rel.x, -sn, cs];
-            let cols = [
-                c0 + O_XT + 6,
-                c0 + O_XT + 7,
-                c0 + O_XT + 2,
-                c0 + O_XB,
-                c0 + O_XB + 1,
-            ];
-            for j in 0..5 {
-                e.put(r0 + 15, cols[j], gy[j]);
-                e.put(r0 + 16, cols[j], -gy[j]);
+            let mut up = [(0usize, 0.0); 6];
+            let mut down = [(0usize, 0.0); 6];
+            let gy = [(c0 + l.o_xb, -sn), (c0 + l.o_xb + 1, cs)];
+            let gt = [sn, -cs, -soft.rel.x];
+            let n_ent = if l.coupled { 6 } else { 3 };
+            for (j, &(c, v)) in gy.iter().enumerate() {
+                up[j] = (c, v);
+                down[j] = (c, -v);
             }
-            e.put(r0 + 15, c0 + O_S, -1.0);
-            e.put(r0 + 16, c0 + O_S, -1.0);
+            up[2] = (o_s, -1.0);
+            down[2] = (o_s, -1.0);
+            if l.coupled {
+                for j in 0..3 {
+                    let c = c0 + l.o_xt + T_POSE[j];
+                    up[3 + j] = (c, gt[j]);
+                    down[3 + j] = (c, -gt[j]);
+                }
+            }
             let dev = soft.rel.y - st.rel_pos.y;
-            b[r0 + 15] = st.envelope_lat - dev;
-            b[r0 + 16] = st.envelope_lat + dev;
-            // 17: s ≥ 0.
-            e.put(r0 + 17, c0 + O_S, -1.0);
-            b[r0 + 17] = 0.0;
-            // 18: the compliance band's upper side: F_n/k + gap ≤ band + s, near contact
-            // only (apart, the force bound of row 7 is zero instead).
-            for j in 0..3 {
-                e.put(r0 + 18, c0 + O_XB + B_POSE[j], soft.gap_b[j]);
-                e.put(r0 + 18, c0 + O_XT + T_POSE[j], soft.gap_t[j]);
-            }
-            e.put(r0 + 18, c0 + O_F, fs / s.contact.stiffness);
-            e.put(r0 + 18, c0 + O_S, -1.0);
-            b[r0 + 18] = if soft.band {
-                s.contact.band - soft.gap
-            } else {
-                FAR
-            };
+            row(e, b, &up[..n_ent], st.envelope_lat - dev);
+            row(e, b, &down[..n_ent], st.envelope_lat + dev);
+            // s ≥ 0.
+            row(e, b, &[(o_s, -1.0)], 0.0);
+            debug_assert_eq!(r, n_eq + l.rows * (k + 1));
         }
     }
 }

@@ -135,7 +135,7 @@ pub struct QpSettings {
 impl Default for QpSettings {
     fn default() -> Self {
         Self {
-            max_iter: 30,
+            max_iter: 50,
             tol_gap: 1e-3,
             tol_feas: 1e-4,
             iterative_refinement: false,
