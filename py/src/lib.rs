@@ -16,6 +16,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 mod models;
+mod mpc;
 mod plant;
 mod surrogate;
 
@@ -165,5 +166,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     plant::register(m)?;
     models::register(m)?;
     surrogate::register(m)?;
+    mpc::register(m)?;
     Ok(())
 }

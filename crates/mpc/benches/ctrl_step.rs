@@ -97,7 +97,7 @@ fn bench_surrogate(
     params: &ParamSet,
     road: &Road,
     records: &[Record],
-    target: Box<dyn TargetModel + Send>,
+    target: Box<dyn TargetModel + Send + Sync>,
 ) {
     let mut mpc = CoupledMpc::new(params, MU, target, MpcSettings::default()).unwrap();
     let mut i = 0;

@@ -18,7 +18,7 @@ fn main() {
     if converged {
         settings.mode = ScpMode::Converged;
     }
-    let target: Box<dyn TargetModel + Send> =
+    let target: Box<dyn TargetModel + Send + Sync> =
         Box::new(FourDofTarget::new(&params.target, mu, settings.dt));
     let mut mpc = CoupledMpc::new(&params, mu, target, settings.clone()).unwrap();
     println!("{mpc:?}");

@@ -239,7 +239,7 @@ pub struct CoupledMpc {
     settings: MpcSettings,
     n: usize,
     bullet: BulletModel,
-    target: Box<dyn TargetModel + Send>,
+    target: Box<dyn TargetModel + Send + Sync>,
     shapes: Shapes,
     steer_max: f64,
     steer_rate: f64,
@@ -262,7 +262,7 @@ pub struct CoupledMpc {
     qp_bullet: Qp,
     /// Whether the last QP was the coupled one.
     coupled: bool,
-    clock: Box<dyn Clock + Send>,
+    clock: Box<dyn Clock + Send + Sync>,
 }
 
 impl std::fmt::Debug for CoupledMpc {
@@ -302,7 +302,7 @@ impl CoupledMpc {
     pub fn new(
         params: &ParamSet,
         mu: f64,
-        target: Box<dyn TargetModel + Send>,
+        target: Box<dyn TargetModel + Send + Sync>,
         settings: MpcSettings,
     ) -> Result<Self, MpcError> {
         settings.validate()?;
@@ -350,7 +350,7 @@ impl CoupledMpc {
 
     /// Replace the clock the time budget and the step times are read from.
     #[must_use]
-    pub fn with_clock(mut self, clock: Box<dyn Clock + Send>) -> Self {
+    pub fn with_clock(mut self, clock: Box<dyn Clock + Send + Sync>) -> Self {
         self.clock = clock;
         self
     }

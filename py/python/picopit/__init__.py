@@ -36,7 +36,7 @@ __all__ = [
 ]
 
 # The plant and the control models are bound as their Rust APIs land; re-export what exists.
-for _name in ("Plant", "BulletModel", "FourDofTarget", "SurrogateModel"):
+for _name in ("Plant", "BulletModel", "FourDofTarget", "SurrogateModel", "CoupledMpc", "MpcError"):
     if hasattr(_core, _name):
         globals()[_name] = getattr(_core, _name)
         __all__.append(_name)

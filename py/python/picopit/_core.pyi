@@ -19,6 +19,10 @@ GRAVITY: float
 class ParamError(ValueError):
     """A parameter set or parameter file that cannot be used; the message names the field."""
 
+class MpcError(ValueError):
+    """Bad MPC settings, construction input or control-step input; the message names the
+    field."""
+
 class ModelError(ValueError):
     """A surrogate model file that cannot be used; the message names the metadata key or
     tensor (docs/model-format.md)."""
@@ -230,3 +234,80 @@ class SurrogateModel:
         """The raw de-normalised network output ``o = [dvx, dvy, dr, dp, dphi, dpsi, dx_b,
         dy_b]`` (8,) for ``features = [vx, vy, r, p, phi, delta, T_b, f_bx, f_by, M_z]``
         (10,)."""
+
+class MpcTimes(TypedDict):
+    linearise: float
+    assemble: float
+    qp: float
+    total: float
+
+class MpcResult(TypedDict):
+    status: str
+    """``RtiStep``, ``Converged``, ``IterationCap``, ``TimeBudget`` or ``QpFailure``."""
+    command: _F64
+    """``[delta_f, T_r]`` to apply now; always finite."""
+    fallback: Optional[str]
+    """None, ``shifted_plan`` or ``brake`` (with ``QpFailure``)."""
+    coupled: bool
+    """Whether the QP carried the target and the contact force."""
+    scp_iterations: int
+    qp_iterations: int
+    merit: float
+    max_violation: float
+    times: MpcTimes
+
+class MpcPlan(TypedDict):
+    u: _F64
+    f: _F64
+    target: _F64
+    bullet: _F64
+    gap: _F64
+
+class CoupledMpc:
+    """The coupled collision MPC (crates/mpc): SCP over Clarabel QPs, N = 20, dt = 0.05 s.
+    ``target_model`` is ``4dof`` or the path of a surrogate file (``SurrogateModel``);
+    ``settings`` is TOML (``mpc::MpcSettings``, missing fields default); ``side`` the side the
+    default reference works on. Bad values raise MpcError naming the field."""
+
+    def __init__(
+        self,
+        params: str = "full_size",
+        mu: float = 0.9,
+        target_model: str = "4dof",
+        settings: Optional[str] = None,
+        side: str = "left",
+    ) -> None: ...
+    @property
+    def settings(self) -> str: ...
+    @property
+    def horizon(self) -> int: ...
+    @property
+    def target_model(self) -> str: ...
+    @property
+    def param_count(self) -> int: ...
+    @property
+    def qp_sizes(self) -> Tuple[Tuple[int, int], Tuple[int, int]]:
+        """(columns, rows) of the coupled QP and of the bullet-only QP."""
+    @property
+    def linearisation_error(self) -> float: ...
+    def set_road(self, road_toml: Optional[str]) -> None: ...
+    def set_straight_road(
+        self, length: float = 2000.0, lanes: int = 3, lane_width: float = 3.5, shoulder: float = 1.0
+    ) -> None: ...
+    def set_obstacles(self, obstacles: _ArrayLike) -> None:
+        """(n, 7): ``[x, y, heading, vx, vy, length, width]`` at time 0."""
+    def default_reference(self, target: _ArrayLike, bullet: _ArrayLike, lane_heading: float = 0.0) -> None: ...
+    def set_reference(self, stages: _ArrayLike, target_heading: float, target_weight: float) -> None:
+        """(N, 8): ``[rel_x, rel_y, rel_heading, rel_speed, track, fn_lo, fn_hi, envelope_lat]``."""
+    def reference(self) -> _F64: ...
+    def solve(
+        self,
+        target: _ArrayLike,
+        bullet: _ArrayLike,
+        target_input: Optional[_ArrayLike] = None,
+        last_command: Optional[_ArrayLike] = None,
+        time: float = 0.0,
+    ) -> MpcResult:
+        """One control step; the GIL is released meanwhile."""
+    def plan(self) -> MpcPlan: ...
+    def reset(self) -> None: ...

@@ -16,11 +16,11 @@ pub fn params() -> ParamSet {
     ParamSet::builtin("full_size").unwrap()
 }
 
-pub fn four_dof(params: &ParamSet) -> Box<dyn TargetModel + Send> {
+pub fn four_dof(params: &ParamSet) -> Box<dyn TargetModel + Send + Sync> {
     Box::new(FourDofTarget::new(&params.target, MU, 0.05))
 }
 
-pub fn mpc_with(settings: MpcSettings, target: Box<dyn TargetModel + Send>) -> CoupledMpc {
+pub fn mpc_with(settings: MpcSettings, target: Box<dyn TargetModel + Send + Sync>) -> CoupledMpc {
     CoupledMpc::new(&params(), MU, target, settings).unwrap()
 }
 
