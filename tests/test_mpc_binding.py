@@ -93,3 +93,21 @@ def test_same_input_same_command():
         m.default_reference(target, bullet)
         outs.append(m.solve(target, bullet, last_command=[0.0, 0.0])["command"])
     np.testing.assert_array_equal(outs[0], outs[1])
+
+
+def test_evaluate_scores_the_solvers_own_plan_with_its_merit():
+    m = mpc()
+    target, bullet = states(*touching(), v_b=16.0)
+    m.default_reference(target, bullet)
+    out = m.solve(target, bullet)
+    plan = m.plan()
+    merit, viol = m.evaluate(target, bullet, plan["u"], plan["f"])
+    assert merit == pytest.approx(out["merit"], rel=1e-9)
+    assert viol == pytest.approx(out["max_violation"], rel=1e-9, abs=1e-12)
+    # A worse plan (hold the steering hard left) scores worse.
+    u_bad = plan["u"].copy()
+    u_bad[:, 0] = 0.3
+    assert m.evaluate(target, bullet, u_bad, plan["f"])[0] > merit
+    lin = m.linearisation()
+    assert lin["gap"].shape == (20,) and lin["road_bullet"].shape == (20, 4)
+    assert any(lin["band"])

@@ -374,6 +374,133 @@ impl PyCoupledMpc {
         Ok(d)
     }
 
+    /// The linearisation the last QP used, per stage (arrays of length N): `gamma`,
+    /// `point_target` (N, 2), `point_bullet` (N, 2), `gap` (at x_{k+1}), `gap_grad_bullet`
+    /// (N, 3) and `gap_grad_target` (N, 3) on [X, Y, ψ], `fn_max`, `band` (bool), and the
+    /// soft rows `road_bullet`, `road_target`, `obstacle_bullet`, `obstacle_target` as
+    /// (N, 4) `[gX, gY, gψ, rhs]` meaning `g · δpose − s ≤ rhs`; and the linearisation point
+    /// itself: `u_lin` (N, 2), `f_lin` (N, 2), `target_lin` (N+1, 8), `bullet_lin` (N+1, 6).
+    fn linearisation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let n = self.core.settings().horizon;
+        let st: Vec<mpc::StageLinearisation> =
+            (0..n).map(|k| self.core.stage_linearisation(k)).collect();
+        let d = PyDict::new(py);
+        let col = |f: &dyn Fn(&mpc::StageLinearisation) -> f64| -> Vec<f64> {
+            st.iter().map(f).collect()
+        };
+        let mat = |f: &dyn Fn(&mpc::StageLinearisation) -> Vec<f64>| -> Vec<Vec<f64>> {
+            st.iter().map(f).collect()
+        };
+        d.set_item("gamma", PyArray1::from_vec(py, col(&|s| s.gamma)))?;
+        d.set_item("gap", PyArray1::from_vec(py, col(&|s| s.gap)))?;
+        d.set_item("fn_max", PyArray1::from_vec(py, col(&|s| s.fn_max)))?;
+        d.set_item("band", st.iter().map(|s| s.band).collect::<Vec<bool>>())?;
+        let two = |v: Vec2| vec![v.x, v.y];
+        for (name, rows) in [
+            ("point_target", mat(&|s| two(s.point_target))),
+            ("point_bullet", mat(&|s| two(s.point_bullet))),
+            ("gap_grad_bullet", mat(&|s| s.gap_grad_bullet.to_vec())),
+            ("gap_grad_target", mat(&|s| s.gap_grad_target.to_vec())),
+        ] {
+            d.set_item(name, PyArray2::from_vec2(py, &rows).expect("rows"))?;
+        }
+        let lp = self.core.linearisation_point();
+        let rows_of = |v: &[nalgebra::SVector<f64, 2>]| -> Vec<Vec<f64>> {
+            v.iter().map(|x| x.as_slice().to_vec()).collect()
+        };
+        d.set_item(
+            "u_lin",
+            PyArray2::from_vec2(py, &rows_of(&lp.u)).expect("rows"),
+        )?;
+        d.set_item(
+            "f_lin",
+            PyArray2::from_vec2(py, &rows_of(&lp.f)).expect("rows"),
+        )?;
+        let xt: Vec<Vec<f64>> = lp.xt.iter().map(|x| x.as_slice().to_vec()).collect();
+        let xb: Vec<Vec<f64>> = lp.xb.iter().map(|x| x.as_slice().to_vec()).collect();
+        d.set_item("target_lin", PyArray2::from_vec2(py, &xt).expect("rows"))?;
+        d.set_item("bullet_lin", PyArray2::from_vec2(py, &xb).expect("rows"))?;
+        let row4 = |(g, r): ([f64; 3], f64)| vec![g[0], g[1], g[2], r];
+        for (name, rows) in [
+            ("road_bullet", mat(&|s| row4(s.road_bullet))),
+            ("road_target", mat(&|s| row4(s.road_target))),
+            ("obstacle_bullet", mat(&|s| row4(s.obstacle_bullet))),
+            ("obstacle_target", mat(&|s| row4(s.obstacle_target))),
+        ] {
+            d.set_item(name, PyArray2::from_vec2(py, &rows).expect("rows"))?;
+        }
+        Ok(d)
+    }
+
+    /// Merit (cost + penalty · violations on the nonlinear models and geometry) and the
+    /// largest violation of the plan that inputs `u` (N, 2) and forces `f` (N, 2) produce
+    /// from these states, with the current road, obstacles and reference: the yardstick for
+    /// comparing plans from different solvers.
+    #[pyo3(signature = (target, bullet, u, f, target_input = None, last_command = None, time = 0.0))]
+    #[allow(clippy::too_many_arguments)]
+    fn evaluate(
+        &mut self,
+        py: Python<'_>,
+        target: &Bound<'_, PyAny>,
+        bullet: &Bound<'_, PyAny>,
+        u: &Bound<'_, PyAny>,
+        f: &Bound<'_, PyAny>,
+        target_input: Option<&Bound<'_, PyAny>>,
+        last_command: Option<&Bound<'_, PyAny>>,
+        time: f64,
+    ) -> PyResult<(f64, f64)> {
+        let xt = vec_arg::<8>(target, "target")?;
+        let xb = vec_arg::<6>(bullet, "bullet")?;
+        let ut = target_input
+            .map(|a| vec_arg::<2>(a, "target_input"))
+            .transpose()?
+            .unwrap_or_else(TargetInput::zeros);
+        let last = last_command
+            .map(|a| vec_arg::<2>(a, "last_command"))
+            .transpose()?
+            .unwrap_or_else(BulletInput::zeros);
+        let time = finite(time, "time")?;
+        let n = self.core.settings().horizon;
+        let u_rows = table(u, "u", 2)?;
+        let f_rows = table(f, "f", 2)?;
+        if u_rows.len() != n || f_rows.len() != n {
+            return Err(MpcError::new_err(format!(
+                "u, f: expected {n} rows (the horizon), got {} and {}",
+                u_rows.len(),
+                f_rows.len()
+            )));
+        }
+        let u: Vec<BulletInput> = u_rows
+            .iter()
+            .map(|r| BulletInput::new(r[0], r[1]))
+            .collect();
+        let f: Vec<Vec2> = f_rows.iter().map(|r| Vec2::new(r[0], r[1])).collect();
+        let Self {
+            core,
+            reference,
+            road,
+            obstacles,
+            ..
+        } = self;
+        py.detach(|| {
+            core.evaluate(
+                &MpcInput {
+                    time,
+                    target: xt,
+                    bullet: xb,
+                    target_input: ut,
+                    last_command: last,
+                    road: road.as_ref(),
+                    obstacles,
+                    reference,
+                },
+                &u,
+                &f,
+            )
+        })
+        .map_err(mpc_err)
+    }
+
     /// The largest |x_QP − x_rollout| of the last QP's step (the linearisation error).
     #[getter]
     fn linearisation_error(&self) -> f64 {

@@ -23,7 +23,8 @@ pub mod settings;
 
 pub use clock::{Clock, MonotonicClock, TickClock};
 pub use mpc::{
-    CoupledMpc, Fallback, MpcError, MpcInput, MpcOutput, MpcStatus, SolveError, StepTimes,
+    CoupledMpc, Fallback, MpcError, MpcInput, MpcOutput, MpcStatus, SolveError, StageLinearisation,
+    StepTimes,
 };
 pub use plan::Plan;
 pub use qp::QpStatus;

@@ -197,6 +197,32 @@ struct SoftRows {
     obs_t: EdgeRowC,
     /// Bullet position in the target frame and its gradients.
     rel: Vec2Copy,
+    /// The contact frame of step k at the linearisation: γ and the points of action in
+    /// each body (held over the step).
+    gamma: f64,
+    point_target: Vec2Copy,
+    point_bullet: Vec2Copy,
+}
+
+/// One stage's linearisation of the contact and the soft constraints, as the last QP used
+/// it (for diagnostics and for peers that must solve the identical problem). Rows read
+/// `grad · [δX, δY, δψ] − s ≤ rhs`; the gap is at x_{k+1}.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StageLinearisation {
+    pub gamma: f64,
+    pub point_target: Vec2,
+    pub point_bullet: Vec2,
+    pub gap: f64,
+    pub gap_grad_bullet: [f64; 3],
+    pub gap_grad_target: [f64; 3],
+    /// The normal-force bound of f_k (N).
+    pub fn_max: f64,
+    /// Whether the compliance band's upper side is active.
+    pub band: bool,
+    pub road_bullet: ([f64; 3], f64),
+    pub road_target: ([f64; 3], f64),
+    pub obstacle_bullet: ([f64; 3], f64),
+    pub obstacle_target: ([f64; 3], f64),
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -251,6 +277,9 @@ pub struct CoupledMpc {
     lin: Plan,
     cand: Plan,
     prev: Plan,
+    /// The linearisation point of the last QP (states, inputs, forces), kept for
+    /// diagnostics and peers after `lin` has moved on.
+    lin_snapshot: Plan,
     have_prev: bool,
     /// Largest difference between the QP's predicted states and the nonlinear rollout of
     /// its inputs at the last QP (a diagnostic of the linearisation).
@@ -334,6 +363,7 @@ impl CoupledMpc {
             lin: Plan::new(n),
             cand: Plan::new(n),
             prev: Plan::new(n),
+            lin_snapshot: Plan::new(n),
             have_prev: false,
             model_error: 0.0,
             stage_error: vec![(0.0, 0); n],
@@ -522,6 +552,7 @@ impl CoupledMpc {
             self.assemble(input, trust);
             times.assemble += self.clock.now() - ta;
             let obj_lin = self.objective_at_lin(input.reference);
+            self.snapshot_linearisation();
             let tq = self.clock.now();
             let qs = if self.coupled {
                 self.qp_coupled.solve()
@@ -815,7 +846,90 @@ impl CoupledMpc {
                 x: cs * d.x + sn * d.y,
                 y: -sn * d.x + cs * d.y,
             };
+            let (ct, cb) = (self.lin.ct[k], self.lin.cb[k]);
+            row.gamma = ct.gamma;
+            row.point_target = Vec2Copy {
+                x: ct.point_in_body.x,
+                y: ct.point_in_body.y,
+            };
+            row.point_bullet = Vec2Copy {
+                x: cb.point_in_body.x,
+                y: cb.point_in_body.y,
+            };
         }
+    }
+
+    fn snapshot_linearisation(&mut self) {
+        let (a, b) = (&mut self.lin_snapshot, &self.lin);
+        a.u.copy_from_slice(&b.u);
+        a.f.copy_from_slice(&b.f);
+        a.xt.copy_from_slice(&b.xt);
+        a.xb.copy_from_slice(&b.xb);
+        a.pair.copy_from_slice(&b.pair);
+    }
+
+    /// The trajectory the last QP was linearised at: inputs, forces and both vehicles'
+    /// states (the `pair` gaps too; Jacobians are not kept).
+    #[must_use]
+    pub fn linearisation_point(&self) -> &Plan {
+        &self.lin_snapshot
+    }
+
+    /// The linearisation of stage `k` of the last control step's (last) QP.
+    ///
+    /// # Panics
+    /// If `k` is not below the horizon.
+    #[must_use]
+    pub fn stage_linearisation(&self, k: usize) -> StageLinearisation {
+        let r = &self.soft[k];
+        let pair = |e: &EdgeRowC| (e.grad, e.rhs);
+        StageLinearisation {
+            gamma: r.gamma,
+            point_target: Vec2::new(r.point_target.x, r.point_target.y),
+            point_bullet: Vec2::new(r.point_bullet.x, r.point_bullet.y),
+            gap: r.gap,
+            gap_grad_bullet: r.gap_b,
+            gap_grad_target: r.gap_t,
+            fn_max: r.fn_max,
+            band: r.band,
+            road_bullet: pair(&r.road_b),
+            road_target: pair(&r.road_t),
+            obstacle_bullet: pair(&r.obs_b),
+            obstacle_target: pair(&r.obs_t),
+        }
+    }
+
+    /// The merit (cost + penalty · violations, on the nonlinear models and geometry) and the
+    /// largest violation of the plan that `u` and `f` produce from the input's states: the
+    /// one yardstick for comparing plans, e.g. picopit's against a peer solver's. Forces are
+    /// clipped as in every rollout. Overwrites the internal candidate buffer (not the plan).
+    ///
+    /// # Errors
+    /// Non-finite input, or `u`/`f` not of the horizon's length.
+    pub fn evaluate(
+        &mut self,
+        input: &MpcInput<'_>,
+        u: &[BulletInput],
+        f: &[Vec2],
+    ) -> Result<(f64, f64), SolveError> {
+        check_input(input, self.n)?;
+        if u.len() != self.n || f.len() != self.n {
+            return Err(SolveError::Reference);
+        }
+        self.cand.u.copy_from_slice(u);
+        self.cand.f.copy_from_slice(f);
+        self.cand.xt[0] = input.target;
+        self.cand.xb[0] = input.bullet;
+        let ctx = RolloutCtx {
+            bullet: &self.bullet,
+            shapes: &self.shapes,
+            target_input: &input.target_input,
+            force_max: self.settings.contact.force_max,
+            release: self.settings.contact.gap_release,
+            friction: self.settings.contact.friction,
+        };
+        rollout(&ctx, self.target.as_mut(), &mut self.cand, false);
+        Ok(self.merit(&self.cand, input))
     }
 
     fn assemble(&mut self, input: &MpcInput<'_>, trust: f64) {

@@ -6,7 +6,7 @@ Returned arrays are fresh float64 copies.
 """
 
 import os
-from typing import Dict, List, Optional, Sequence, Tuple, TypedDict, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -310,4 +310,18 @@ class CoupledMpc:
     ) -> MpcResult:
         """One control step; the GIL is released meanwhile."""
     def plan(self) -> MpcPlan: ...
+    def linearisation(self) -> Dict[str, Any]:
+        """The last QP's per-stage linearisation (contact frame, gap and its gradients, the
+        soft rows as ``[gX, gY, gpsi, rhs]``)."""
+    def evaluate(
+        self,
+        target: _ArrayLike,
+        bullet: _ArrayLike,
+        u: _ArrayLike,
+        f: _ArrayLike,
+        target_input: Optional[_ArrayLike] = None,
+        last_command: Optional[_ArrayLike] = None,
+        time: float = 0.0,
+    ) -> Tuple[float, float]:
+        """(merit, largest violation) of the plan that ``u`` (N, 2) and ``f`` (N, 2) produce."""
     def reset(self) -> None: ...
