@@ -14,7 +14,10 @@ fn main() {
     let converged = std::env::args().any(|a| a == "converged");
     let params = ParamSet::builtin("full_size").unwrap();
     let mu = 0.9;
-    let mut settings = MpcSettings::default();
+    let mut settings = match std::env::var("MPC_TOML") {
+        Ok(text) => MpcSettings::from_toml_str(&text).unwrap(),
+        Err(_) => MpcSettings::default(),
+    };
     if converged {
         settings.mode = ScpMode::Converged;
     }
@@ -79,6 +82,7 @@ fn main() {
     let staged = std::env::var("REF").is_err();
     let mut cmd = dynamics::bullet::BulletInput::zeros();
     let mut peak: f64 = 0.0;
+    let (mut t_coupled, mut t_bullet) = (Vec::new(), Vec::new());
     for step in 0..160 {
         let t = step as f64 * settings.dt;
         let xt = plant.target_state();
@@ -115,6 +119,11 @@ fn main() {
             std::process::exit(0);
         }
         cmd = out.command;
+        if mpc.last_qp_coupled() {
+            t_coupled.push(out.times.total * 1e3);
+        } else {
+            t_bullet.push(out.times.total * 1e3);
+        }
         plant.set_bullet_command_blended(cmd[0], cmd[1]);
         plant.advance(settings.dt);
         let c = plant.take_contact_average();
@@ -146,9 +155,22 @@ fn main() {
     }
     let xt = plant.target_state();
     println!(
+        "coupled steps: median {:.2} ms max {:.2} ms ({} steps); bullet-only: median {:.2} ms max {:.2} ms ({} steps)",
+        median(&mut t_coupled), t_coupled.last().copied().unwrap_or(0.0), t_coupled.len(),
+        median(&mut t_bullet), t_bullet.last().copied().unwrap_or(0.0), t_bullet.len()
+    );
+    println!(
         "final target heading {:.1}°, speed {:.2}, peak contact {:.0} N",
         xt[2].to_degrees(),
         xt[0].hypot(xt[1]),
         peak
     );
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }

@@ -140,6 +140,15 @@ pub(crate) struct Qp {
     pub n: usize,
     pub m: usize,
     solver: DefaultSolver<f64>,
+    /// With equilibration on, Clarabel's scaling is computed from the data it is built with
+    /// and reused by every update; the solver is therefore rebuilt once, at the first solve,
+    /// from real data (during the controller's warm-up), and never again.
+    rebuild: Option<(
+        CscMatrix<f64>,
+        CscMatrix<f64>,
+        DefaultSettings<f64>,
+        Vec<SupportedConeT<f64>>,
+    )>,
     pub p_slots: Vec<usize>,
     pub a_slots: Vec<usize>,
     pub p_val: Vec<f64>,
@@ -166,7 +175,7 @@ pub(crate) fn clarabel_settings(
         tol_gap_rel: s.tol_gap,
         tol_feas: s.tol_feas,
         tol_ktratio: 1e-5,
-        equilibrate_enable: false,
+        equilibrate_enable: s.equilibrate,
         presolve_enable: false,
         input_sparse_dropzeros: false,
         direct_solve_method: "qdldl".to_owned(),
@@ -198,6 +207,14 @@ impl Qp {
         let p_colptr = p.matrix.colptr.clone();
         let p_rowval = p.matrix.rowval.clone();
         let a_val = a.matrix.nzval.clone();
+        let rebuild = settings.equilibrate_enable.then(|| {
+            (
+                p.matrix.clone(),
+                a.matrix.clone(),
+                settings.clone(),
+                cones.to_vec(),
+            )
+        });
         let solver = DefaultSolver::new(&p.matrix, &q, &a.matrix, &b, &cones, settings)
             .map_err(|e| e.to_string())?;
         if !solver.is_data_update_allowed() {
@@ -207,6 +224,7 @@ impl Qp {
             n,
             m,
             solver,
+            rebuild,
             p_slots: p.slots,
             a_slots: a.slots,
             p_val,
@@ -222,6 +240,14 @@ impl Qp {
     /// Push the current values into the solver and solve (within the time limit given at
     /// construction).
     pub(crate) fn solve(&mut self) -> QpStatus {
+        if let Some((mut p, mut a, settings, cones)) = self.rebuild.take() {
+            p.nzval.copy_from_slice(&self.p_val);
+            a.nzval.copy_from_slice(&self.a_val);
+            match DefaultSolver::new(&p, &self.q, &a, &self.b, &cones, settings) {
+                Ok(s) => self.solver = s,
+                Err(_) => return QpStatus::Failed,
+            }
+        }
         let ok = self.solver.update_P(&self.p_val).is_ok()
             && self.solver.update_A(&self.a_val).is_ok()
             && self.solver.update_q(&self.q).is_ok()

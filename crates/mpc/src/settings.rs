@@ -130,6 +130,9 @@ pub struct QpSettings {
     pub tol_feas: f64,
     /// Clarabel's iterative refinement of each KKT solve.
     pub iterative_refinement: bool,
+    /// Clarabel's Ruiz equilibration, computed once from the first real QP (the
+    /// controller's warm-up) and reused by every in-place update.
+    pub equilibrate: bool,
 }
 
 impl Default for QpSettings {
@@ -139,6 +142,7 @@ impl Default for QpSettings {
             tol_gap: 1e-3,
             tol_feas: 1e-4,
             iterative_refinement: false,
+            equilibrate: false,
         }
     }
 }
