@@ -143,12 +143,7 @@ pub(crate) struct Qp {
     /// With equilibration on, Clarabel's scaling is computed from the data it is built with
     /// and reused by every update; the solver is therefore rebuilt once, at the first solve,
     /// from real data (during the controller's warm-up), and never again.
-    rebuild: Option<(
-        CscMatrix<f64>,
-        CscMatrix<f64>,
-        DefaultSettings<f64>,
-        Vec<SupportedConeT<f64>>,
-    )>,
+    rebuild: Option<Rebuild>,
     pub p_slots: Vec<usize>,
     pub a_slots: Vec<usize>,
     pub p_val: Vec<f64>,
@@ -161,6 +156,14 @@ pub(crate) struct Qp {
     /// A point at which [`Qp::objective_at_z`] evaluates the objective.
     pub z: Vec<f64>,
 }
+
+/// What rebuilding the solver from real data needs: P and A patterns, settings, cones.
+type Rebuild = (
+    CscMatrix<f64>,
+    CscMatrix<f64>,
+    DefaultSettings<f64>,
+    Vec<SupportedConeT<f64>>,
+);
 
 /// Clarabel settings for the MPC's QPs.
 pub(crate) fn clarabel_settings(
