@@ -5,7 +5,7 @@ use crate::geom::{edge_row, gap_gradient, pair_geometry, EdgeRow};
 use crate::plan::{rollout, Plan, RolloutCtx, Shapes};
 use crate::qp::{clarabel_settings, Emitter, Pattern, Qp, QpStatus};
 use crate::reference::Reference;
-use crate::settings::{MpcSettings, ScpMode, SettingsError};
+use crate::settings::{MpcSettings, QpSettings, ScpMode, SettingsError};
 use dynamics::bullet::{BulletInput, BulletModel, BulletState};
 use dynamics::contact::obb_signed_distance;
 use dynamics::geometry::{Pose2, Vec2};
@@ -376,6 +376,26 @@ impl CoupledMpc {
         };
         me.warm_up();
         Ok(me)
+    }
+
+    /// Change the QP solver's settings between control steps (validated; allocates, so not
+    /// from inside the real-time loop).
+    ///
+    /// # Errors
+    /// [`MpcError::Settings`] naming a bad field, [`MpcError::Solver`] if Clarabel refuses.
+    pub fn set_qp_settings(&mut self, qp: QpSettings) -> Result<(), MpcError> {
+        let mut s = self.settings.clone();
+        s.qp = qp;
+        s.validate()?;
+        let cs = clarabel_settings(&s.qp, s.time_budget);
+        self.qp_coupled
+            .update_settings(cs.clone())
+            .map_err(MpcError::Solver)?;
+        self.qp_bullet
+            .update_settings(cs)
+            .map_err(MpcError::Solver)?;
+        self.settings = s;
+        Ok(())
     }
 
     /// Replace the clock the time budget and the step times are read from.

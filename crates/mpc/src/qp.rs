@@ -267,6 +267,16 @@ impl Qp {
         status
     }
 
+    /// Replace the Clarabel settings (not on the hot path: it allocates).
+    pub(crate) fn update_settings(&mut self, settings: DefaultSettings<f64>) -> Result<(), String> {
+        if let Some(r) = self.rebuild.as_mut() {
+            r.2 = settings.clone();
+        }
+        self.solver
+            .update_settings(settings)
+            .map_err(|e| e.to_string())
+    }
+
     /// `½ zᵀ P z + qᵀ z` at `self.z`, with the current (not yet solved) data.
     pub(crate) fn objective_at_z(&self) -> f64 {
         let z = &self.z;

@@ -211,3 +211,53 @@ fn a_target_model_with_another_step_is_refused() {
     let e = mpc::CoupledMpc::new(&p, MU, t, settings()).unwrap_err();
     assert!(e.to_string().contains("0.1"), "{e}");
 }
+
+#[test]
+fn a_failed_qp_gives_a_safe_command_brake_first_then_the_shifted_plan() {
+    let s = situation(-8.0, 3.0, 0.0, 15.0, 17.0);
+    let road = road();
+    let mut st = settings();
+    st.qp.max_iter = 1; // no QP converges in one interior-point iteration
+    let mut m = mpc_with(st, four_dof(&params()));
+    // No previous plan: controlled braking.
+    let out = m.solve(&input(&s, Some(&road))).unwrap();
+    assert_eq!(out.status, MpcStatus::QpFailure);
+    assert_eq!(out.fallback, Some(mpc::Fallback::Brake));
+    assert!(out.command[1] < 0.0, "braking: {out:?}");
+    // A good step, then a failing one: the previous plan shifted by one step.
+    let mut qp = settings().qp;
+    m.set_qp_settings(qp.clone()).unwrap();
+    let good = m.solve(&input(&s, Some(&road))).unwrap();
+    assert_eq!(good.status, MpcStatus::RtiStep);
+    let next_planned = m.plan().u[1];
+    qp.max_iter = 1;
+    m.set_qp_settings(qp).unwrap();
+    let out = m.solve(&input(&s, Some(&road))).unwrap();
+    assert_eq!(out.status, MpcStatus::QpFailure);
+    assert_eq!(out.fallback, Some(mpc::Fallback::ShiftedPlan));
+    assert_eq!(out.command, next_planned);
+    // Bad QP settings are refused with the field named.
+    let mut bad = settings().qp;
+    bad.tol_gap = -1.0;
+    let e = m.set_qp_settings(bad).unwrap_err();
+    assert!(e.to_string().contains("qp.tol_gap"), "{e}");
+}
+
+#[test]
+fn the_time_budget_stops_converged_scp_on_an_injected_clock() {
+    let s = situation(-6.0, 2.8, -0.05, 15.0, 17.0);
+    let mut st = settings();
+    st.mode = ScpMode::Converged;
+    st.max_scp_iter = 50;
+    // Every clock reading advances 1 ms; the budget allows a handful of readings.
+    st.time_budget = 0.012;
+    let clock = Box::new(mpc::TickClock::new(1e-3));
+    let mut m = mpc_with(st, four_dof(&params())).with_clock(clock);
+    let out = m.solve(&input(&s, Some(&road()))).unwrap();
+    assert!(
+        matches!(out.status, MpcStatus::TimeBudget | MpcStatus::Converged),
+        "{out:?}"
+    );
+    assert!(out.scp_iterations < 50, "{out:?}");
+    assert!(out.command.iter().all(|v| v.is_finite()));
+}
