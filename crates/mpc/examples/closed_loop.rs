@@ -83,6 +83,7 @@ fn main() {
     let mut cmd = dynamics::bullet::BulletInput::zeros();
     let mut peak: f64 = 0.0;
     let (mut t_coupled, mut t_bullet) = (Vec::new(), Vec::new());
+    let mut it_coupled = Vec::new();
     for step in 0..160 {
         let t = step as f64 * settings.dt;
         let xt = plant.target_state();
@@ -120,6 +121,7 @@ fn main() {
         }
         cmd = out.command;
         if mpc.last_qp_coupled() {
+            it_coupled.push(f64::from(out.qp_iterations));
             t_coupled.push(out.times.total * 1e3);
         } else {
             t_bullet.push(out.times.total * 1e3);
@@ -158,6 +160,11 @@ fn main() {
         "coupled steps: median {:.2} ms max {:.2} ms ({} steps); bullet-only: median {:.2} ms max {:.2} ms ({} steps)",
         median(&mut t_coupled), t_coupled.last().copied().unwrap_or(0.0), t_coupled.len(),
         median(&mut t_bullet), t_bullet.last().copied().unwrap_or(0.0), t_bullet.len()
+    );
+    println!(
+        "coupled QP iterations: median {} max {}",
+        median(&mut it_coupled),
+        it_coupled.last().copied().unwrap_or(0.0)
     );
     println!(
         "final target heading {:.1}°, speed {:.2}, peak contact {:.0} N",
