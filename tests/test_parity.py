@@ -1,6 +1,7 @@
 """Rust (``picopit._core.SurrogateModel``, crates/pico_nn) against the PyTorch float64
 reference of the same model file (docs/model-format.md): outputs within 1e-9 relative on
-1000 random inputs; step Jacobians against torch.autograd and central finite differences.
+1000 random inputs (random road μ within the model's range); step Jacobians against
+torch.autograd and central finite differences.
 
 Runs on a dense (teacher-like, R = identity) file, a clustered PicoPINN-like file with pruned
 weights, and the shipped models when present. Skipped only while the binding does not exist.
@@ -32,27 +33,27 @@ REL = 1e-9
 
 
 def _stats(rng):
-    scale = np.array([10, 1, 0.5, 0.3, 0.05, 0.1, 1e3, 5e3, 5e3, 5e3])
-    return {"in_mean": rng.normal(size=10) * scale * 0.1, "in_std": rng.uniform(0.5, 2.0, 10) * scale,
+    scale = np.array([10, 1, 0.5, 0.3, 0.05, 0.1, 1e3, 5e3, 5e3, 5e3, 0.3])
+    return {"in_mean": rng.normal(size=11) * scale * 0.1, "in_std": rng.uniform(0.5, 2.0, 11) * scale,
             "out_mean": rng.normal(size=8) * 0.01, "out_std": rng.uniform(0.01, 0.5, 8)}
 
 
 def _files(tmp_path_factory):
     d = tmp_path_factory.mktemp("parity")
     rng = np.random.default_rng(20)
-    dense = dense_mlp((10, 64, 64, 64, 8), _stats(rng), seed=21)
+    dense = dense_mlp((11, 64, 64, 64, 8), _stats(rng), seed=21, dt=0.05)
     with torch.no_grad():
         dense.theta.add_(0.05 * torch.randn(dense.param_count, generator=torch.Generator().manual_seed(22), dtype=torch.float64))
-    save_model(dense, d / "dense.safetensors", kind="pinn", dt=0.05, param_set="full_size",
-               provenance={"seed": "21"})
-    student = dense_mlp((10, 32, 32, 8), _stats(rng), seed=23)
+    save_model(dense, d / "dense.safetensors", kind="pinn", param_set="full_size",
+               mu_range=(0.15, 1.0), provenance={"seed": "21"})
+    student = dense_mlp((11, 32, 32, 8), _stats(rng), seed=23, dt=0.05)
     with torch.no_grad():
         student.theta[:40] *= 1e-4  # pruned weights
     clusters = [TensorClusters.of(w.detach().numpy()) for w, _ in student.weights()]
     t, _ = choose_threshold(clusters, 72, 812, prune=0.02)
     pico, _ = compressed_model(student, clusters, t, prune=0.02)
-    save_model(pico, d / "pico.safetensors", kind="picopinn", dt=0.05, param_set="full_size",
-               provenance={"seed": "23"})
+    save_model(pico, d / "pico.safetensors", kind="picopinn", param_set="full_size",
+               mu_range=(0.15, 1.0), provenance={"seed": "23"})
     files = [d / "dense.safetensors", d / "pico.safetensors"]
     for s in ("full_size", "half_scale"):
         for k in ("pinn", "picopinn"):
@@ -81,6 +82,11 @@ def _inputs(rng, n, model):
     return x, u, fc, gamma, point
 
 
+def _mus(rng, n, rm):
+    lo, hi = rm.mu_range
+    return rng.uniform(lo, hi, n)
+
+
 def _rel(a, b, floor):
     return np.max(np.abs(a - b) / np.maximum(np.abs(b), floor))
 
@@ -93,23 +99,29 @@ def test_outputs_match_torch(model_files):
         assert rm.param_count == tm.param_count
         assert list(rm.layers) == tm.layers
         assert math.isclose(rm.dt, float(meta["dt"]))
-        z = tm.in_mean.numpy() + rng.normal(size=(N, 10)) * 2 * tm.in_std.numpy()
+        assert rm.mu == float(meta["mu_default"])
+        z = tm.in_mean.numpy() + rng.normal(size=(N, 11)) * 2 * tm.in_std.numpy()
         with torch.no_grad():
             ref = tm(torch.from_numpy(z)).numpy()
         got = np.array([rm.forward(z[i]) for i in range(N)])
         floor = 1e-6 * tm.out_std.numpy()
         assert _rel(got, ref, floor) <= REL, path
+        assert rm.mu == float(meta["mu_default"]), "forward leaves the model's mu"
         x, u, fc, gamma, point = _inputs(rng, N, tm)
+        mu = _mus(rng, N, rm)
         with torch.no_grad():
-            ref = tm.step(*(torch.from_numpy(np.ascontiguousarray(a)) for a in (x, u, fc, gamma, point))).numpy()
-        got = np.array([rm.step(x[i], u[i], fc[i], gamma[i], point[i]) for i in range(N)])
-        assert _rel(got, ref, 1e-6) <= REL, path
+            ref = tm.step(*(torch.from_numpy(np.ascontiguousarray(a)) for a in (x, u, fc, gamma, point, mu))).numpy()
+        got = []
+        for i in range(N):
+            rm.mu = mu[i]
+            got.append(rm.step(x[i], u[i], fc[i], gamma[i], point[i]))
+        assert _rel(np.array(got), ref, 1e-6) <= REL, path
 
 
-def _torch_jac(tm, x, u, fc, gamma, point):
+def _torch_jac(tm, x, u, fc, gamma, point, mu):
     def f(xx, uu, ff):
         return tm.step(xx[None], uu[None], ff[None], torch.tensor([gamma], dtype=torch.float64),
-                       torch.from_numpy(point)[None])[0]
+                       torch.from_numpy(point)[None], torch.tensor([mu], dtype=torch.float64))[0]
 
     return torch.autograd.functional.jacobian(
         f, (torch.from_numpy(x), torch.from_numpy(u), torch.from_numpy(fc)))
@@ -121,15 +133,17 @@ def test_jacobians_match_autograd_and_finite_differences(model_files):
         tm, _ = load_model(path)
         rm = _core.SurrogateModel(str(path))
         x, u, fc, gamma, point = _inputs(rng, 40, tm)
+        mu = _mus(rng, 40, rm)
         # positions near the origin: central differences of X+ = X + ... lose digits at large X
         x[:, 6:8] = rng.uniform(-5, 5, (40, 2))
         # difference steps scaled like the inputs (N and N m arguments are large)
         typical = [np.ones(8), np.array([1.0, tm.in_std[6].item()]), np.full(2, tm.in_std[7].item())]
         for i in range(40):
+            rm.mu = mu[i]
             xn, A, B, F = (np.asarray(v) for v in rm.step_jac(x[i], u[i], fc[i], gamma[i], point[i]))
             assert A.shape == (8, 8) and B.shape == (8, 2) and F.shape == (8, 2)
             assert np.array_equal(xn, np.asarray(rm.step(x[i], u[i], fc[i], gamma[i], point[i])))
-            JA, JB, JF = (j.numpy() for j in _torch_jac(tm, x[i], u[i], fc[i], gamma[i], point[i]))
+            JA, JB, JF = (j.numpy() for j in _torch_jac(tm, x[i], u[i], fc[i], gamma[i], point[i], mu[i]))
             for got, ref in ((A, JA), (B, JB), (F, JF)):
                 scale = np.maximum(np.abs(ref).max(axis=0, keepdims=True), 1e-12)
                 assert np.max(np.abs(got - ref) / scale) <= 1e-8, path

@@ -46,7 +46,11 @@ def runtime_params(obj):
 
 
 def is_property(fn: ast.FunctionDef) -> bool:
-    return any(isinstance(d, ast.Name) and d.id == "property" for d in fn.decorator_list)
+    """``@property`` or its ``@name.setter``."""
+    return any((isinstance(d, ast.Name) and d.id == "property")
+               or (isinstance(d, ast.Attribute) and d.attr == "setter" and isinstance(d.value, ast.Name)
+                   and d.value.id == fn.name)
+               for d in fn.decorator_list)
 
 
 def test_module_level_names_match():

@@ -14,13 +14,14 @@ import picopit
 
 safetensors_numpy = pytest.importorskip("safetensors.numpy")
 
-FEATURES = "vx,vy,r,p,phi,delta,T_b,f_bx,f_by,M_z"
+FEATURES = "vx,vy,r,p,phi,delta,T_b,f_bx,f_by,M_z,mu"
 OUTPUTS = "dvx,dvy,dr,dp,dphi,dpsi,dx_b,dy_b"
-WIDTHS = [10, 16, 16, 8]
+WIDTHS = [11, 16, 16, 8]
+DT = 0.05
 SEED = 20261122
 
-IN_MEAN = np.array([15.0, 0.0, 0.0, 0.0, 0.0, 0.0, 500.0, 0.0, 0.0, 0.0])
-IN_STD = np.array([6.0, 1.0, 0.4, 0.2, 0.03, 0.1, 800.0, 4000.0, 4000.0, 6000.0])
+IN_MEAN = np.array([15.0, 0.0, 0.0, 0.0, 0.0, 0.0, 500.0, 0.0, 0.0, 0.0, 0.55])
+IN_STD = np.array([6.0, 1.0, 0.4, 0.2, 0.03, 0.1, 800.0, 4000.0, 4000.0, 6000.0, 0.25])
 OUT_MEAN = np.array([-0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.75, 0.0])
 OUT_STD = np.array([0.3, 0.2, 0.1, 0.05, 0.01, 0.02, 0.3, 0.05])
 
@@ -70,7 +71,7 @@ def expanded(tensors):
 def metadata(**over):
     meta = {
         "format": "picopit-mlp",
-        "version": "1",
+        "version": "2",
         "kind": "picopinn",
         "activation": "tanh",
         "layers": ",".join(map(str, WIDTHS)),
@@ -78,6 +79,8 @@ def metadata(**over):
         "outputs": OUTPUTS,
         "dt": "0.05",
         "param_set": "full_size",
+        "mu_range": "0.15,1.0",
+        "mu_default": "0.9",
         "seed": str(SEED),
     }
     meta.update(over)
@@ -90,19 +93,22 @@ def write(path: Path, tensors, meta) -> Path:
 
 
 def reference_forward(weights, z):
-    h = (np.asarray(z) - IN_MEAN) / IN_STD
+    """The network on the 11 features plus the kinematic base dt·[0, 0, 0, 0, p, r, vx, vy]."""
+    z = np.asarray(z)
+    h = (z - IN_MEAN) / IN_STD
     for l, (w, b) in enumerate(weights):
         h = w @ h + b
         if l + 1 < len(weights):
             h = np.tanh(h)
-    return OUT_MEAN + OUT_STD * h
+    base = DT * np.array([0, 0, 0, 0, z[3], z[2], z[0], z[1]])
+    return OUT_MEAN + OUT_STD * h + base
 
 
-def features(x, u, fc, gamma, point):
+def features(x, u, fc, gamma, point, mu):
     a = gamma - x[2]
     fb = np.array([np.cos(a) * fc[0] - np.sin(a) * fc[1], np.sin(a) * fc[0] + np.cos(a) * fc[1]])
     mz = point[0] * fb[1] - point[1] * fb[0]
-    return np.array([x[0], x[1], x[3], x[4], x[5], u[0], u[1], fb[0], fb[1], mz])
+    return np.array([x[0], x[1], x[3], x[4], x[5], u[0], u[1], fb[0], fb[1], mz, mu])
 
 
 def random_case(rng):
@@ -131,8 +137,27 @@ def test_load_and_properties(clustered_file):
     assert m.layers == WIDTHS
     assert m.metadata["seed"] == str(SEED)
     assert m.metadata["format"] == "picopit-mlp"
-    # A pathlib.Path works too.
+    assert m.mu == 0.9 and m.mu_range == (0.15, 1.0)
+    # A pathlib.Path works too, and μ is a constructor argument.
+    assert picopit.SurrogateModel(path, mu=0.4).mu == 0.4
     assert picopit.SurrogateModel(path).param_count == 30
+
+
+def test_mu_is_validated_and_changes_the_prediction(clustered_file):
+    path, _ = clustered_file
+    m = picopit.SurrogateModel(str(path))
+    x, u, fc, gamma, point = random_case(np.random.default_rng(SEED + 9))
+    dry = m.step(x, u, fc, gamma, point)
+    for bad in (0.1, 1.01, -1.0, float("nan"), float("inf")):
+        with pytest.raises(picopit.ModelError, match="mu"):
+            m.mu = bad
+        with pytest.raises(picopit.ModelError, match="mu_range"):
+            picopit.SurrogateModel(str(path), mu=bad)
+        assert m.mu == 0.9
+    m.mu = 0.2
+    wet = m.step(x, u, fc, gamma, point)
+    assert not np.array_equal(wet, dry)
+    np.testing.assert_array_equal(picopit.SurrogateModel(str(path), mu=0.2).step(x, u, fc, gamma, point), wet)
 
 
 def test_forward_and_step_match_the_numpy_reference(clustered_file):
@@ -142,7 +167,8 @@ def test_forward_and_step_match_the_numpy_reference(clustered_file):
     rng = np.random.default_rng(SEED + 1)
     for _ in range(50):
         x, u, fc, gamma, point = random_case(rng)
-        z = features(x, u, fc, gamma, point)
+        m.mu = rng.uniform(0.15, 1.0)
+        z = features(x, u, fc, gamma, point, m.mu)
         o = reference_forward(weights, z)
         np.testing.assert_allclose(m.forward(z), o, rtol=1e-12, atol=1e-14)
         c, s = np.cos(x[2]), np.sin(x[2])
@@ -207,8 +233,13 @@ def test_model_error_is_exported_and_a_value_error():
     [
         (lambda t, m: m.pop("dt"), "dt"),
         (lambda t, m: m.pop("features"), "features"),
-        (lambda t, m: m.update(version="2"), "version"),
-        (lambda t, m: m.update(layers="10,16,8"), "layer"),
+        (lambda t, m: m.update(version="1"), "version"),
+        (lambda t, m: m.update(layers="11,16,8"), "layer"),
+        (lambda t, m: m.update(layers="10,16,16,8"), "layers"),
+        (lambda t, m: m.pop("mu_range"), "mu_range"),
+        (lambda t, m: m.update(mu_range="1.0,0.15"), "mu_range"),
+        (lambda t, m: m.update(mu_default="1.5"), "mu_default"),
+        (lambda t, m: m.update(features="vx,vy,r,p,phi,delta,T_b,f_bx,f_by,M_z"), "features"),
         (lambda t, m: m.update(outputs="dvx,dvy"), "outputs"),
         (lambda t, m: t["theta"].__setitem__(3, np.nan), "theta"),
         (lambda t, m: t["in_std"].__setitem__(2, 0.0), "in_std"),
@@ -216,7 +247,7 @@ def test_model_error_is_exported_and_a_value_error():
         (lambda t, m: t["layer2.weight.idx"].__setitem__((0, 0), 10_000), "layer2.weight.idx"),
         (lambda t, m: t["layer1.bias.sign"].__setitem__(1, 3), "layer1.bias.sign"),
         (lambda t, m: t.update({"layer3.bias.idx": t["layer3.bias.idx"].astype(np.int64)}), "layer3.bias.idx"),
-        (lambda t, m: t.update({"in_mean": t["in_mean"][:9]}), "in_mean"),
+        (lambda t, m: t.update({"in_mean": t["in_mean"][:10]}), "in_mean"),
         (lambda t, m: t.pop("out_std"), "out_std"),
     ],
 )
@@ -250,3 +281,5 @@ def test_arguments_are_validated(clustered_file):
         m.step_jac(np.zeros(8), np.zeros(2), fc=[np.nan, 0.0])
     with pytest.raises(ValueError, match="features"):
         m.forward(np.zeros(8))
+    with pytest.raises(ValueError, match="features"):
+        m.forward(np.zeros(10))

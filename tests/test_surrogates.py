@@ -22,7 +22,8 @@ from picopit.cli import main  # noqa: E402
 from picopit.compress import TensorClusters, choose_threshold, compressed_model  # noqa: E402
 from picopit.physics import FourDof  # noqa: E402
 from picopit.surrogate_nn import (FEATURES, OUTPUTS, ModelFileError, apply_increments,  # noqa: E402
-                                  dense_mlp, features, increments, load_model, save_model)
+                                  dense_mlp, features, increments, kinematic_base, load_model,
+                                  save_model)
 from picopit.train import Split, physics_targets  # noqa: E402
 
 
@@ -45,7 +46,7 @@ def _t(a):
 
 
 def _stats(rng):
-    return {"in_mean": rng.normal(size=10), "in_std": rng.uniform(0.5, 2.0, 10) * np.array([10, 1, 1, 0.3, 0.05, 0.1, 1e3, 5e3, 5e3, 5e3]),
+    return {"in_mean": rng.normal(size=11), "in_std": rng.uniform(0.5, 2.0, 11) * np.array([10, 1, 1, 0.3, 0.05, 0.1, 1e3, 5e3, 5e3, 5e3, 0.3]),
             "out_mean": rng.normal(size=8) * 0.01, "out_std": rng.uniform(0.01, 0.5, 8)}
 
 
@@ -86,7 +87,8 @@ def test_physics_targets_include_collocation_points():
     s = Split.of(a, 4)
     m4 = FourDof.from_params(load_params_dict("full_size")["target"])
     p = physics_targets(s, m4, 0.5, seed=0)
-    assert p.z.shape == (75, 10) and p.o.shape == (75, 8)
+    assert p.z.shape == (75, 11) and p.o.shape == (75, 8)
+    assert torch.all(p.z[:, 10] == 0.8)  # μ is the last feature
     assert torch.isfinite(p.o).all()
 
 
@@ -105,11 +107,35 @@ def test_increments_round_trip_and_feature_invariance():
     x2 = x.copy()
     x2[:, 2] += 1.234
     x2[:, 6:8] += 55.0
-    z1 = features(_t(x), _t(u), _t(fc), _t(gamma), _t(point))
-    z2 = features(_t(x2), _t(u), _t(fc), _t(gamma + 1.234), _t(point))
+    mu = rng.uniform(0.15, 1.0, 200)
+    z1 = features(_t(x), _t(u), _t(fc), _t(gamma), _t(point), _t(mu))
+    z2 = features(_t(x2), _t(u), _t(fc), _t(gamma + 1.234), _t(point), _t(mu))
     assert torch.allclose(z1, z2, atol=1e-9)
+    assert torch.equal(z1[:, 10], _t(mu))
+    assert torch.equal(features(_t(x), _t(u), _t(fc), _t(gamma), _t(point), 0.4)[:, 10], torch.full((200,), 0.4, dtype=torch.float64))
     # The moment is the cross product of the point and the body-frame force.
     assert torch.allclose(z1[:, 9], z1[:, 7] * 0 + _t(point[:, 0]) * z1[:, 8] - _t(point[:, 1]) * z1[:, 7])
+
+
+def test_network_adds_the_kinematic_base_to_its_residual():
+    """o = dt·[0, 0, 0, 0, p, r, vx, vy] + out_mean + out_std ⊙ y: a network whose last layer
+    is zero predicts exactly the Euler increments plus out_mean, and μ is an input."""
+    rng = np.random.default_rng(9)
+    m = dense_mlp((11, 16, 8), _stats(rng), seed=3, dt=0.05)
+    x, u, fc, gamma, point = _random_inputs(rng, 40)
+    z = features(_t(x), _t(u), _t(fc), _t(gamma), _t(point), 0.5)
+    base = kinematic_base(z, 0.05)
+    assert torch.equal(base[:, 5], 0.05 * _t(x[:, 3])) and torch.equal(base[:, 6], 0.05 * _t(x[:, 0]))
+    assert torch.equal(base[:, 4], 0.05 * _t(x[:, 4])) and torch.equal(base[:, 7], 0.05 * _t(x[:, 1]))
+    assert torch.all(base[:, :4] == 0)
+    with torch.no_grad():
+        assert torch.allclose(m(z), base + m.residual(z), atol=1e-15)
+        w2, b2 = m.weights()[1]
+        m.theta[-(w2.numel() + b2.numel()):] = 0.0
+        assert torch.allclose(m(z), base + m.out_mean, atol=1e-15)
+        m2 = dense_mlp((11, 16, 8), _stats(np.random.default_rng(9)), seed=3, dt=0.05)
+        z_wet = features(_t(x), _t(u), _t(fc), _t(gamma), _t(point), 0.2)
+        assert not torch.allclose(m2(z), m2(z_wet))
 
 
 # --------------------------------------------------------------------------------------
@@ -119,7 +145,7 @@ def test_increments_round_trip_and_feature_invariance():
 
 def test_clustering_ties_weights_to_sign_times_centre_and_meets_budget():
     rng = np.random.default_rng(4)
-    student = dense_mlp((10, 24, 24, 8), _stats(rng), seed=5)
+    student = dense_mlp((11, 24, 24, 8), _stats(rng), seed=5, dt=0.05)
     with torch.no_grad():  # a few near-zero weights to be pruned
         student.theta[:30] *= 1e-4
     ws = [w.detach().numpy() for w, _ in student.weights()]
@@ -150,14 +176,14 @@ def test_clustering_ties_weights_to_sign_times_centre_and_meets_budget():
 
 def _write_model(tmp_path, name="m.safetensors", compressed=False):
     rng = np.random.default_rng(6)
-    m = dense_mlp((10, 16, 16, 8), _stats(rng), seed=7)
+    m = dense_mlp((11, 16, 16, 8), _stats(rng), seed=7, dt=0.05)
     if compressed:
         c = [TensorClusters.of(w.detach().numpy()) for w, _ in m.weights()]
         t, _ = choose_threshold(c, 40, 150, prune=0.05)
         m, _ = compressed_model(m, c, t, prune=0.05)
     path = tmp_path / name
-    save_model(m, path, kind="picopinn" if compressed else "pinn", dt=0.05, param_set="full_size",
-               provenance={"data_hash": "sha256:test", "seed": "7", "command": "test"})
+    save_model(m, path, kind="picopinn" if compressed else "pinn", param_set="full_size",
+               mu_range=(0.15, 1.0), provenance={"data_hash": "sha256:test", "seed": "7", "command": "test"})
     return m, path
 
 
@@ -165,17 +191,19 @@ def _write_model(tmp_path, name="m.safetensors", compressed=False):
 def test_model_file_round_trip(tmp_path, compressed):
     m, path = _write_model(tmp_path, compressed=compressed)
     back, meta = load_model(path)
-    assert back.param_count == m.param_count and back.layers == [10, 16, 16, 8]
-    assert meta["format"] == "picopit-mlp" and meta["version"] == "1"
+    assert back.param_count == m.param_count and back.layers == [11, 16, 16, 8]
+    assert meta["format"] == "picopit-mlp" and meta["version"] == "2"
     assert meta["features"] == ",".join(FEATURES) and meta["outputs"] == ",".join(OUTPUTS)
-    assert meta["layers"] == "10,16,16,8" and float(meta["dt"]) == 0.05 and meta["seed"] == "7"
+    assert FEATURES[-1] == "mu" and len(FEATURES) == 11
+    assert meta["layers"] == "11,16,16,8" and float(meta["dt"]) == 0.05 and meta["seed"] == "7"
+    assert meta["mu_range"] == "0.15,1.0" and meta["mu_default"] == "0.9" and back.dt == 0.05
     assert meta["kind"] == ("picopinn" if compressed else "pinn")
-    z = _t(np.random.default_rng(8).normal(size=(50, 10)) * back.in_std.numpy())
+    z = _t(np.random.default_rng(8).normal(size=(50, 11)) * back.in_std.numpy())
     with torch.no_grad():
         assert torch.equal(m(z), back(z))
     t = load_file(str(path))
     assert t["theta"].dtype == np.float64 and t["layer1.weight.idx"].dtype == np.int32
-    assert t["layer1.weight.sign"].dtype == np.int8 and t["layer1.weight.idx"].shape == (16, 10)
+    assert t["layer1.weight.sign"].dtype == np.int8 and t["layer1.weight.idx"].shape == (16, 11)
     if not compressed:  # the teacher's R is the identity
         idx = np.concatenate([t[f"layer{l}.{p}.idx"].ravel() for l in (1, 2, 3) for p in ("weight", "bias")])
         assert np.array_equal(np.sort(idx), np.arange(m.param_count))
@@ -202,9 +230,13 @@ def _corrupt(tmp_path, edit):
     (lambda t, m: t.__setitem__("layer3.weight.idx", t["layer3.weight.idx"].astype(np.int64)), "layer3.weight.idx"),
     (lambda t, m: t.__setitem__("layer1.weight.sign", t["layer1.weight.sign"][:, :5].copy()), "layer1.weight.sign"),
     (lambda t, m: m.pop("dt"), "dt"),
-    (lambda t, m: m.__setitem__("version", "2"), "version"),
+    (lambda t, m: m.__setitem__("version", "1"), "version"),
     (lambda t, m: m.__setitem__("features", "vx,vy"), "features"),
-    (lambda t, m: m.__setitem__("layers", "10,16,8"), "layer"),
+    (lambda t, m: m.__setitem__("layers", "11,16,8"), "layer"),
+    (lambda t, m: m.pop("mu_range"), "mu_range"),
+    (lambda t, m: m.__setitem__("mu_range", "0.15"), "mu_range"),
+    (lambda t, m: m.__setitem__("mu_range", "1.0,0.15"), "mu_range"),
+    (lambda t, m: m.__setitem__("mu_default", "0.05"), "mu_default"),
 ])
 def test_malformed_model_file_names_the_field(tmp_path, edit, name):
     bad = _corrupt(tmp_path, edit)
@@ -308,7 +340,7 @@ def test_pipeline_smoke(tiny_data, tmp_path, capsys):
         for k in ("params", "heading_rmse_rad", "roll_rmse_rad", "rollout_heading_rmse_rad"):
             assert k in m and m[k] is not None
     assert res["models"]["4dof"]["params"] == 0
-    assert res["models"]["pinn"]["params"] == 9544
+    assert res["models"]["pinn"]["params"] == 11 * 64 + 64 + 2 * (64 * 64 + 64) + 64 * 8 + 8
     assert 56 < res["models"]["picopinn"]["params"] <= 812
     assert (tmp_path / "ev" / "eval.png").is_file()
     _, meta = load_model(pico)
@@ -320,7 +352,7 @@ def test_pipeline_smoke(tiny_data, tmp_path, capsys):
 def test_cli_bad_input_exits_2_naming_the_problem(tmp_path, capsys):
     assert main(["train", "--data", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
     assert "dataset.npz" in capsys.readouterr().err
-    assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--layers", "10,x,8"]) == 2
+    assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--layers", "11,x,8"]) == 2
     assert "layers" in capsys.readouterr().err
     assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--epochs", "0"]) == 2
     assert "epochs" in capsys.readouterr().err

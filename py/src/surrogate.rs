@@ -19,8 +19,9 @@ pyo3::create_exception!(
     "A surrogate model file that cannot be used; the message names the metadata key or tensor."
 );
 
-/// A teacher PINN or PicoPINN loaded from a `picopit-mlp` v1 safetensors file: state
-/// `[vx, vy, yaw, r, p, phi, X, Y]`, input `[delta, T_b]`, one step of the file's `dt`.
+/// A teacher PINN or PicoPINN loaded from a `picopit-mlp` v2 safetensors file: state
+/// `[vx, vy, yaw, r, p, phi, X, Y]`, input `[delta, T_b]`, one step of the file's `dt`, on a
+/// road of adhesion `mu` (default: the file's `mu_default`).
 #[pyclass(module = "picopit._core", name = "SurrogateModel")]
 pub struct SurrogateModel {
     inner: CoreSurrogate,
@@ -29,11 +30,36 @@ pub struct SurrogateModel {
 #[pymethods]
 impl SurrogateModel {
     #[new]
-    fn new(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let inner = py
+    #[pyo3(signature = (path, mu = None))]
+    fn new(py: Python<'_>, path: PathBuf, mu: Option<f64>) -> PyResult<Self> {
+        let mut inner = py
             .detach(move || CoreSurrogate::from_path(&path))
             .map_err(|e| ModelError::new_err(e.to_string()))?;
+        if let Some(mu) = mu {
+            inner
+                .set_mu(mu)
+                .map_err(|e| ModelError::new_err(e.to_string()))?;
+        }
         Ok(Self { inner })
+    }
+
+    /// Road adhesion μ, the network's last input; settable within `mu_range`.
+    #[getter]
+    fn mu(&self) -> f64 {
+        self.inner.mu()
+    }
+
+    #[setter]
+    fn set_mu(&mut self, mu: f64) -> PyResult<()> {
+        self.inner
+            .set_mu(mu)
+            .map_err(|e| ModelError::new_err(e.to_string()))
+    }
+
+    /// `(lo, hi)`: the road adhesion the model was trained on (the file's `mu_range`).
+    #[getter]
+    fn mu_range(&self) -> (f64, f64) {
+        self.inner.mu_range()
     }
 
     /// `pinn` or `picopinn` (the file's `kind`).
@@ -105,15 +131,16 @@ impl SurrogateModel {
         Ok(jac_out(py, &next, &jac.a, &jac.b, &jac.f))
     }
 
-    /// The raw de-normalised network output `o` (8,) for the features
-    /// `[vx, vy, r, p, phi, delta, T_b, f_bx, f_by, M_z]` (10,).
+    /// The increments `o` (8,) (kinematic base included) for the features
+    /// `[vx, vy, r, p, phi, delta, T_b, f_bx, f_by, M_z, mu]` (11,); μ is taken from the
+    /// features (not range-checked) and the model's own `mu` is left unchanged.
     fn forward<'py>(
         &mut self,
         py: Python<'py>,
         features: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let z = vec_arg::<10>(features, "features")?;
-        let o = self.inner.forward(&z.into());
+        let z = vec_arg::<11>(features, "features")?;
+        let o = self.inner.forward_features(&z.into());
         Ok(PyArray1::from_slice(py, &o))
     }
 }

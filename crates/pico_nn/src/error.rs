@@ -28,13 +28,13 @@ pub enum ModelError {
         reason: String,
     },
     /// `format`/`version` name a file layout this loader does not read.
-    #[error("metadata `{key}` = {value:?}: unsupported; this loader reads format `picopit-mlp` version 1")]
+    #[error("metadata `{key}` = {value:?}: unsupported; this loader reads format `picopit-mlp` version 2 (regenerate version-1 files with models/regenerate.sh)")]
     Unsupported { key: &'static str, value: String },
     /// A required tensor is absent.
     #[error("tensor `{name}` is missing")]
     MissingTensor { name: String },
     /// A tensor the format does not define (or a layer beyond the `layers` metadata).
-    #[error("tensor `{name}` is not part of format picopit-mlp v1 with layers {layers}")]
+    #[error("tensor `{name}` is not part of format picopit-mlp v2 with layers {layers}")]
     UnexpectedTensor { name: String, layers: String },
     /// A tensor of the wrong element type.
     #[error("tensor `{name}` has dtype {found}, expected {expected}")]
@@ -72,6 +72,9 @@ pub enum ModelError {
         value: i64,
         len: usize,
     },
+    /// A road adhesion outside the model's trained range (or not finite).
+    #[error("mu = {value}: must be finite and within the model's mu_range [{lo}, {hi}] (the road adhesion it was trained on)")]
+    Mu { value: f64, lo: f64, hi: f64 },
     /// A `sign` entry other than −1, 0, +1.
     #[error("tensor `{name}`[{index}] = {value}: a sign must be -1, 0 or 1")]
     BadSign {

@@ -1,4 +1,4 @@
-//! Reading and validating a `picopit-mlp` v1 file (`docs/model-format.md`).
+//! Reading and validating a `picopit-mlp` v2 file (`docs/model-format.md`).
 //!
 //! Validation happens here, once; what it returns is consistent by construction, so the
 //! network code never checks again.
@@ -9,23 +9,29 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 
 /// The `format` metadata value.
 pub const FORMAT: &str = "picopit-mlp";
-/// The only `version` this loader reads.
-pub const VERSION: &str = "1";
-/// The feature names, in the network's input order.
-pub const FEATURES: [&str; 10] = [
-    "vx", "vy", "r", "p", "phi", "delta", "T_b", "f_bx", "f_by", "M_z",
+/// The only `version` this loader reads. Version 1 (10 features, no road μ, no kinematic
+/// base) is refused: its models were μ-blind and none is shipped any more.
+pub const VERSION: &str = "2";
+/// The feature names, in the network's input order: the [`N_IN`] per-step features, then
+/// the road adhesion μ (a property of the model instance, [`crate::SurrogateModel::set_mu`]).
+pub const FEATURES: [&str; N_FEATURES] = [
+    "vx", "vy", "r", "p", "phi", "delta", "T_b", "f_bx", "f_by", "M_z", "mu",
 ];
 /// The output names, in the network's output order.
 pub const OUTPUTS: [&str; 8] = ["dvx", "dvy", "dr", "dp", "dphi", "dpsi", "dx_b", "dy_b"];
 /// The `kind` values a file may declare.
 pub const KINDS: [&str; 2] = ["pinn", "picopinn"];
-/// Number of features (network inputs).
+/// Number of network inputs (`layers` starts with it).
+pub const N_FEATURES: usize = 11;
+/// Number of per-step features (state, input and contact: every feature but μ).
 pub const N_IN: usize = 10;
+/// Index of μ among the features.
+pub const MU: usize = 10;
 /// Number of outputs.
 pub const N_OUT: usize = 8;
 
 /// Metadata keys that must be present.
-const REQUIRED: [&str; 9] = [
+const REQUIRED: [&str; 11] = [
     "format",
     "version",
     "kind",
@@ -35,6 +41,8 @@ const REQUIRED: [&str; 9] = [
     "outputs",
     "dt",
     "param_set",
+    "mu_range",
+    "mu_default",
 ];
 
 /// One dense layer, expanded: `weight` row-major `[out][in]`.
@@ -53,8 +61,10 @@ pub(crate) struct Parsed {
     pub widths: Vec<usize>,
     pub n_free: usize,
     pub layers: Vec<DenseLayer>,
-    pub in_mean: [f64; N_IN],
-    pub in_std: [f64; N_IN],
+    pub mu_range: (f64, f64),
+    pub mu_default: f64,
+    pub in_mean: [f64; N_FEATURES],
+    pub in_std: [f64; N_FEATURES],
     pub out_mean: [f64; N_OUT],
     pub out_std: [f64; N_OUT],
 }
@@ -247,6 +257,23 @@ fn check_names(
     Ok(())
 }
 
+/// `lo,hi` with `0 < lo ≤ hi`, both finite.
+fn parse_mu_range(value: &str) -> Result<(f64, f64), ModelError> {
+    let parts: Vec<&str> = value.split(',').map(str::trim).collect();
+    let [lo, hi] = parts[..] else {
+        return Err(bad("mu_range", value, "must be two numbers lo,hi"));
+    };
+    let num = |s: &str| {
+        s.parse::<f64>()
+            .map_err(|e| bad("mu_range", value, format!("not a number ({e})")))
+    };
+    let (lo, hi) = (num(lo)?, num(hi)?);
+    if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
+        return Err(bad("mu_range", value, "must be finite with 0 < lo <= hi"));
+    }
+    Ok((lo, hi))
+}
+
 fn parse_widths(value: &str) -> Result<Vec<usize>, ModelError> {
     let widths = value
         .split(',')
@@ -260,11 +287,11 @@ fn parse_widths(value: &str) -> Result<Vec<usize>, ModelError> {
             "needs at least the input and output widths",
         ));
     }
-    if widths[0] != N_IN || widths[widths.len() - 1] != N_OUT {
+    if widths[0] != N_FEATURES || widths[widths.len() - 1] != N_OUT {
         return Err(bad(
             "layers",
             value,
-            format!("must start with {N_IN} (features) and end with {N_OUT} (outputs)"),
+            format!("must start with {N_FEATURES} (features) and end with {N_OUT} (outputs)"),
         ));
     }
     if widths.contains(&0) {
@@ -308,7 +335,7 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ModelError> {
     }
     let activation = meta(m, "activation");
     if activation.trim() != "tanh" {
-        return Err(bad("activation", activation, "version 1 knows only tanh"));
+        return Err(bad("activation", activation, "version 2 knows only tanh"));
     }
     check_names(m, "features", &FEATURES)?;
     check_names(m, "outputs", &OUTPUTS)?;
@@ -322,6 +349,19 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ModelError> {
     }
     if meta(m, "param_set").trim().is_empty() {
         return Err(bad("param_set", "", "must name a parameter set"));
+    }
+    let mu_range = parse_mu_range(meta(m, "mu_range"))?;
+    let mu_s = meta(m, "mu_default");
+    let mu_default: f64 = mu_s
+        .trim()
+        .parse()
+        .map_err(|e| bad("mu_default", mu_s, format!("not a number ({e})")))?;
+    if !(mu_range.0..=mu_range.1).contains(&mu_default) {
+        return Err(bad(
+            "mu_default",
+            mu_s,
+            format!("must lie in mu_range [{}, {}]", mu_range.0, mu_range.1),
+        ));
     }
     let layers_s = meta(m, "layers");
     let widths = parse_widths(layers_s)?;
@@ -363,8 +403,8 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ModelError> {
         });
     }
     let theta = f64s(&st, "theta", &theta_shape)?;
-    let in_mean = stats::<N_IN>(&st, "in_mean", false)?;
-    let in_std = stats::<N_IN>(&st, "in_std", true)?;
+    let in_mean = stats::<N_FEATURES>(&st, "in_mean", false)?;
+    let in_std = stats::<N_FEATURES>(&st, "in_std", true)?;
     let out_mean = stats::<N_OUT>(&st, "out_mean", false)?;
     let out_std = stats::<N_OUT>(&st, "out_std", true)?;
 
@@ -383,6 +423,8 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ModelError> {
         widths,
         n_free: theta.len(),
         layers,
+        mu_range,
+        mu_default,
         in_mean,
         in_std,
         out_mean,

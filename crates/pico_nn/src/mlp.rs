@@ -15,7 +15,7 @@
 //! rounding (≈ 1e-16 relative per operation). [`Kernel::Portable`] gives bit-identical
 //! results on every machine.
 
-use crate::format::{Parsed, N_IN, N_OUT};
+use crate::format::{Parsed, MU, N_FEATURES, N_IN, N_OUT};
 
 /// Which compiled variant of the arithmetic runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -91,10 +91,15 @@ impl Mac for Fused {
     }
 }
 
-/// Expanded weights and statistics (immutable after load).
+/// Expanded weights and statistics (immutable after load, except the first layer's bias,
+/// into which the constant μ input is folded).
 #[derive(Debug, Clone)]
 struct Weights {
+    /// The file's widths, `[N_FEATURES, …, N_OUT]`.
     widths: Vec<usize>,
+    /// The widths the arithmetic runs on: the file's, with the μ input folded away
+    /// (`dims[0] = N_IN`).
+    dims: Vec<usize>,
     /// Per layer, ŵ transposed: `wt[l][j * out + i] = ŵ_l[i][j]`.
     wt: Vec<Vec<f64>>,
     /// Per layer, ŵ row-major: `w[l][i * in + j] = ŵ_l[i][j]`.
@@ -106,6 +111,12 @@ struct Weights {
     in_std: [f64; N_IN],
     out_mean: [f64; N_OUT],
     out_std: [f64; N_OUT],
+    /// The first layer's bias as stored in the file.
+    b1_file: Vec<f64>,
+    /// The first layer's μ column, `ŵ_1[i][MU]`.
+    w1_mu: Vec<f64>,
+    mu_mean: f64,
+    mu_std: f64,
 }
 
 /// Per-call working memory, sized at load.
@@ -130,43 +141,58 @@ pub struct Mlp {
 impl Mlp {
     pub(crate) fn from_parsed(p: &Parsed) -> Self {
         let widths = p.widths.clone();
+        let mut dims = widths.clone();
+        dims[0] = N_IN;
         let n_layers = widths.len() - 1;
         let mut wt = Vec::with_capacity(n_layers);
         let mut w = Vec::with_capacity(n_layers);
         let mut b = Vec::with_capacity(n_layers);
         for (l, layer) in p.layers.iter().enumerate() {
-            let (n_in, n_out) = (widths[l], widths[l + 1]);
+            let (n_file, n_in, n_out) = (widths[l], dims[l], widths[l + 1]);
+            // Layer 1 keeps the per-step feature columns only; its μ column is folded
+            // into the bias by `set_mu`.
             let mut t = vec![0.0; n_in * n_out];
+            let mut r = vec![0.0; n_in * n_out];
             for i in 0..n_out {
                 for j in 0..n_in {
-                    t[j * n_out + i] = layer.weight[i * n_in + j];
+                    t[j * n_out + i] = layer.weight[i * n_file + j];
+                    r[i * n_in + j] = layer.weight[i * n_file + j];
                 }
             }
             wt.push(t);
-            w.push(layer.weight.clone());
+            w.push(r);
             b.push(layer.bias.clone());
         }
-        let n_last = widths[n_layers - 1];
+        let n1 = widths[1];
+        let w1_mu = (0..n1)
+            .map(|i| p.layers[0].weight[i * N_FEATURES + MU])
+            .collect();
+        let (n_last, stride) = (dims[n_layers - 1], widths[n_layers - 1]);
         let last = &p.layers[n_layers - 1].weight;
         let mut out_gt = vec![0.0; n_last * N_OUT];
         for k in 0..N_OUT {
             for i in 0..n_last {
-                out_gt[i * N_OUT + k] = p.out_std[k] * last[k * n_last + i];
+                out_gt[i * N_OUT + k] = p.out_std[k] * last[k * stride + i];
             }
         }
-        let max_width = widths.iter().copied().max().unwrap_or(N_IN);
-        let h = widths[..n_layers].iter().map(|&n| vec![0.0; n]).collect();
-        Self {
+        let max_width = dims.iter().copied().max().unwrap_or(N_IN);
+        let h = dims[..n_layers].iter().map(|&n| vec![0.0; n]).collect();
+        let mut mlp = Self {
             w: Weights {
+                b1_file: b[0].clone(),
                 widths,
+                dims,
                 wt,
                 w,
                 b,
                 out_gt,
-                in_mean: p.in_mean,
-                in_std: p.in_std,
+                in_mean: std::array::from_fn(|j| p.in_mean[j]),
+                in_std: std::array::from_fn(|j| p.in_std[j]),
                 out_mean: p.out_mean,
                 out_std: p.out_std,
+                w1_mu,
+                mu_mean: p.in_mean[MU],
+                mu_std: p.in_std[MU],
             },
             s: Scratch {
                 h,
@@ -175,10 +201,25 @@ impl Mlp {
             },
             kernel: Kernel::detect(),
             mode: JacobianMode::Reverse,
+        };
+        mlp.set_mu(p.mu_default);
+        mlp
+    }
+
+    /// Fix the μ input (the last feature) at `mu`: the first layer's bias becomes
+    /// `b_1 + ŵ_1[·][μ] · (μ − mean_μ)/std_μ`. No range check here (the model does it).
+    pub fn set_mu(&mut self, mu: f64) {
+        let h = (mu - self.w.mu_mean) / self.w.mu_std;
+        for ((b, &b0), &wm) in self.w.b[0]
+            .iter_mut()
+            .zip(&self.w.b1_file)
+            .zip(&self.w.w1_mu)
+        {
+            *b = wm.mul_add(h, b0);
         }
     }
 
-    /// Layer widths, input first (`[10, …, 8]`).
+    /// Layer widths of the file, input first (`[11, …, 8]`).
     #[must_use]
     pub fn widths(&self) -> &[usize] {
         &self.w.widths
@@ -212,7 +253,8 @@ impl Mlp {
         self.mode = mode;
     }
 
-    /// The de-normalised network output `o` for the features `z`.
+    /// The de-normalised network output `out_mean + out_std ⊙ y` for the per-step
+    /// features `z` and the μ last set.
     pub fn forward(&mut self, z: &[f64; N_IN]) -> [f64; N_OUT] {
         match self.kernel {
             #[cfg(target_arch = "x86_64")]
@@ -226,7 +268,7 @@ impl Mlp {
         }
     }
 
-    /// The output `o` and its Jacobian `jz[k][j] = ∂o_k/∂z_j`.
+    /// The output (as [`Mlp::forward`]) and its Jacobian `jz[k][j] = ∂o_k/∂z_j`.
     pub fn forward_jac(&mut self, z: &[f64; N_IN], jz: &mut [[f64; N_IN]; N_OUT]) -> [f64; N_OUT] {
         match self.kernel {
             #[cfg(target_arch = "x86_64")]
@@ -407,7 +449,7 @@ fn forward_jac<M: Mac, const R: usize>(
 #[inline(always)]
 fn reverse<M: Mac, const R: usize>(w: &Weights, s: &mut Scratch, jz: &mut [[f64; N_IN]; N_OUT]) {
     let n_layers = w.wt.len();
-    let widths = &w.widths;
+    let widths = &w.dims;
     let Scratch { h, ga, gb } = s;
     let g0: &[f64] = if n_layers == 1 {
         &w.out_gt
@@ -447,7 +489,7 @@ fn reverse<M: Mac, const R: usize>(w: &Weights, s: &mut Scratch, jz: &mut [[f64;
 #[inline(always)]
 fn tangent<M: Mac, const R: usize>(w: &Weights, s: &mut Scratch, jz: &mut [[f64; N_IN]; N_OUT]) {
     let n_layers = w.wt.len();
-    let widths = &w.widths;
+    let widths = &w.dims;
     let Scratch { h, ga, gb } = s;
     // T_0 = diag(1/σ_in) folded into the first product.
     let first = &w.w[0];

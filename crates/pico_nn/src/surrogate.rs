@@ -1,7 +1,7 @@
 //! A learned target surrogate (teacher PINN or PicoPINN) behind [`TargetModel`].
 
 use crate::error::ModelError;
-use crate::format::{self, N_IN, N_OUT};
+use crate::format::{self, MU, N_FEATURES, N_IN, N_OUT};
 use crate::mlp::{JacobianMode, Kernel, Mlp};
 use dynamics::target::idx;
 use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
@@ -40,6 +40,15 @@ mod feat {
     pub const MZ: usize = 9;
 }
 
+/// The kinematic base of the increments: `o_k += dt · z_j` for these `(k, j)` pairs
+/// (Δφ ← p, Δψ ← r, Δx_b ← vx, Δy_b ← vy; `docs/model-format.md`).
+const BASE: [(usize, usize); 4] = [
+    (out::DPHI, feat::P),
+    (out::DPSI, feat::R),
+    (out::DXB, feat::VX),
+    (out::DYB, feat::VY),
+];
+
 /// The state row each increment `o_k` adds to, for the rows that are plain sums.
 const ROW_OF: [(usize, usize); 6] = [
     (idx::VX, out::DVX),
@@ -73,12 +82,19 @@ impl BodyForce {
     }
 }
 
-/// A teacher PINN or PicoPINN loaded from a `picopit-mlp` v1 file.
+/// A teacher PINN or PicoPINN loaded from a `picopit-mlp` v2 file.
+///
+/// The road adhesion μ is the network's last input and a property of the instance, as it
+/// is of [`dynamics::FourDofTarget`]: it starts at the file's `mu_default` (0.9 for the
+/// shipped models) and is set with [`SurrogateModel::with_mu`] / [`SurrogateModel::set_mu`]
+/// within the file's `mu_range` (the adhesion the model was trained on).
 #[derive(Debug, Clone)]
 pub struct SurrogateModel {
     net: Mlp,
     kind: String,
     dt: f64,
+    mu: f64,
+    mu_range: (f64, f64),
     n_free: usize,
     metadata: BTreeMap<String, String>,
     jz: [[f64; N_IN]; N_OUT],
@@ -116,10 +132,48 @@ impl SurrogateModel {
             net: Mlp::from_parsed(&p),
             kind: p.kind,
             dt: p.dt,
+            mu: p.mu_default,
+            mu_range: p.mu_range,
             n_free: p.n_free,
             metadata: p.metadata,
             jz: [[0.0; N_IN]; N_OUT],
         })
+    }
+
+    /// The same model on a road of adhesion `mu`.
+    ///
+    /// # Errors
+    /// [`ModelError::Mu`] if `mu` is not finite or outside the file's `mu_range`.
+    pub fn with_mu(mut self, mu: f64) -> Result<Self, ModelError> {
+        self.set_mu(mu)?;
+        Ok(self)
+    }
+
+    /// Set the road adhesion μ used by every following step.
+    ///
+    /// # Errors
+    /// [`ModelError::Mu`] if `mu` is not finite or outside the file's `mu_range`; the
+    /// model keeps its previous μ.
+    pub fn set_mu(&mut self, mu: f64) -> Result<(), ModelError> {
+        let (lo, hi) = self.mu_range;
+        if !(mu.is_finite() && (lo..=hi).contains(&mu)) {
+            return Err(ModelError::Mu { value: mu, lo, hi });
+        }
+        self.mu = mu;
+        self.net.set_mu(mu);
+        Ok(())
+    }
+
+    /// The road adhesion μ in use.
+    #[must_use]
+    pub fn mu(&self) -> f64 {
+        self.mu
+    }
+
+    /// The adhesion range `(lo, hi)` the model was trained on (the file's `mu_range`).
+    #[must_use]
+    pub fn mu_range(&self) -> (f64, f64) {
+        self.mu_range
     }
 
     /// Use `kernel` (or the portable one if this CPU cannot run it).
@@ -142,7 +196,7 @@ impl SurrogateModel {
         &self.metadata
     }
 
-    /// Layer widths, input first (`[10, …, 8]`).
+    /// Layer widths, input first (`[11, …, 8]`).
     #[must_use]
     pub fn layers(&self) -> &[usize] {
         self.net.widths()
@@ -153,7 +207,8 @@ impl SurrogateModel {
         &mut self.net
     }
 
-    /// The 10 network features `z = [vx, vy, r, p, φ, δ, T_b, f_bx, f_by, M_z]`.
+    /// The 10 per-step network features `z = [vx, vy, r, p, φ, δ, T_b, f_bx, f_by, M_z]`
+    /// (the 11th, μ, is the model's).
     #[must_use]
     pub fn features(x: &TargetState, u: &TargetInput, c: &ContactInput) -> [f64; N_IN] {
         Self::features_with(x, u, c, &BodyForce::new(x[idx::PSI], c))
@@ -180,9 +235,29 @@ impl SurrogateModel {
         ]
     }
 
-    /// The raw de-normalised network output `o` for features `z`.
+    /// The increments `o` (kinematic base included) for the per-step features `z` at the
+    /// model's μ.
     pub fn forward(&mut self, z: &[f64; N_IN]) -> [f64; N_OUT] {
-        self.net.forward(z)
+        let mut o = self.net.forward(z);
+        self.add_base(z, &mut o);
+        o
+    }
+
+    /// The increments `o` for all 11 features, μ included (for parity tests; μ is not
+    /// range-checked here and the model's own μ is left as it was).
+    pub fn forward_features(&mut self, z: &[f64; N_FEATURES]) -> [f64; N_OUT] {
+        let zs: [f64; N_IN] = std::array::from_fn(|j| z[j]);
+        self.net.set_mu(z[MU]);
+        let o = self.forward(&zs);
+        self.net.set_mu(self.mu);
+        o
+    }
+
+    /// `o += dt · (kinematic base of z)`.
+    fn add_base(&self, z: &[f64; N_IN], o: &mut [f64; N_OUT]) {
+        for (k, j) in BASE {
+            o[k] += self.dt * z[j];
+        }
     }
 
     /// `x⁺` from `x` and the increments `o`.
@@ -213,7 +288,7 @@ impl TargetModel for SurrogateModel {
 
     fn step(&mut self, x: &TargetState, u: &TargetInput, c: &ContactInput) -> TargetState {
         let z = Self::features(x, u, c);
-        let o = self.net.forward(&z);
+        let o = self.forward(&z);
         Self::next_state(x, &o)
     }
 
@@ -226,7 +301,11 @@ impl TargetModel for SurrogateModel {
     ) -> TargetState {
         let f = BodyForce::new(x[idx::PSI], c);
         let z = Self::features_with(x, u, c, &f);
-        let o = self.net.forward_jac(&z, &mut self.jz);
+        let mut o = self.net.forward_jac(&z, &mut self.jz);
+        self.add_base(&z, &mut o);
+        for (k, j) in BASE {
+            self.jz[k][j] += self.dt;
+        }
         let (px, py) = (c.point_in_body.x, c.point_in_body.y);
 
         // d[k] = [∂o_k/∂x (8) | ∂o_k/∂u (2) | ∂o_k/∂f_c (2)] through the feature map.

@@ -34,8 +34,8 @@ static GLOBAL: CountingAlloc = CountingAlloc;
 #[test]
 fn step_and_step_jac_allocate_nothing() {
     let mut rng = ChaCha8Rng::seed_from_u64(31);
-    let teacher = common::random_teacher(&[10, 64, 64, 64, 8], &mut rng).to_bytes();
-    let pico = common::clustered(&[10, 24, 24, 24, 8], 50, &mut rng)
+    let teacher = common::random_teacher(&[11, 64, 64, 64, 8], &mut rng).to_bytes();
+    let pico = common::clustered(&[11, 24, 24, 24, 8], 50, &mut rng)
         .0
         .to_bytes();
     let mut models = Vec::new();

@@ -12,7 +12,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use safetensors::Dtype;
 
-const WIDTHS: [usize; 4] = [10, 12, 12, 8];
+const WIDTHS: [usize; 4] = [11, 12, 12, 8];
 
 fn base() -> Spec {
     random_teacher(&WIDTHS, &mut ChaCha8Rng::seed_from_u64(21))
@@ -84,6 +84,8 @@ fn missing_metadata_keys_are_named() {
         "outputs",
         "dt",
         "param_set",
+        "mu_range",
+        "mu_default",
     ] {
         let mut s = base();
         s.metadata.remove(key);
@@ -99,7 +101,8 @@ fn missing_metadata_keys_are_named() {
 #[test]
 fn unknown_format_or_version_is_refused() {
     for (key, value) in [
-        ("version", "2"),
+        ("version", "1"),
+        ("version", "3"),
         ("version", "0"),
         ("version", ""),
         ("format", "onnx"),
@@ -116,21 +119,32 @@ fn bad_metadata_values_are_named() {
     let cases: &[(&str, &str)] = &[
         ("kind", "teacher"),
         ("activation", "relu"),
-        ("features", "vx,vy,r,p,phi,delta,T_b,f_bx,f_by"),
-        ("features", "vy,vx,r,p,phi,delta,T_b,f_bx,f_by,M_z"),
+        ("features", "vx,vy,r,p,phi,delta,T_b,f_bx,f_by,M_z"),
+        ("features", "vy,vx,r,p,phi,delta,T_b,f_bx,f_by,M_z,mu"),
+        ("features", "mu,vx,vy,r,p,phi,delta,T_b,f_bx,f_by,M_z"),
         ("outputs", "dvx,dvy,dr,dp,dphi,dpsi,dx_b"),
         ("dt", "0"),
         ("dt", "-0.05"),
         ("dt", "NaN"),
         ("dt", "inf"),
         ("dt", "fast"),
-        ("layers", "10,12,12"),
-        ("layers", "9,12,12,8"),
-        ("layers", "10,12,x,8"),
-        ("layers", "10,0,12,8"),
-        ("layers", "10"),
+        ("layers", "11,12,12"),
+        ("layers", "10,12,12,8"),
+        ("layers", "11,12,x,8"),
+        ("layers", "11,0,12,8"),
+        ("layers", "11"),
         ("layers", ""),
         ("param_set", " "),
+        ("mu_range", "0.15"),
+        ("mu_range", "0.15,1.0,2.0"),
+        ("mu_range", "0,1.0"),
+        ("mu_range", "1.0,0.15"),
+        ("mu_range", "0.15,inf"),
+        ("mu_range", "low,high"),
+        ("mu_default", "1.2"),
+        ("mu_default", "0.1"),
+        ("mu_default", "NaN"),
+        ("mu_default", "dry"),
     ];
     for (key, value) in cases {
         let mut s = base();
@@ -147,11 +161,11 @@ fn bad_metadata_values_are_named() {
 fn layers_inconsistent_with_tensors_are_refused() {
     // Metadata says wider than the tensors are.
     let mut s = base();
-    s.metadata.insert("layers".into(), "10,16,12,8".into());
+    s.metadata.insert("layers".into(), "11,16,12,8".into());
     refuse(&s, &["layer1.weight.idx", "shape"]);
     // Metadata says fewer layers than the file holds.
     let mut s = base();
-    s.metadata.insert("layers".into(), "10,12,8".into());
+    s.metadata.insert("layers".into(), "11,12,8".into());
     let e = refuse(&s, &["layer"]);
     assert!(
         matches!(

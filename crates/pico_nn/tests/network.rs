@@ -11,16 +11,19 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 const SHAPES: [&[usize]; 4] = [
-    &[10, 8],
-    &[10, 24, 24, 24, 8],
-    &[10, 32, 32, 8],
-    &[10, 64, 64, 64, 8],
+    &[11, 8],
+    &[11, 24, 24, 24, 8],
+    &[11, 32, 32, 8],
+    &[11, 64, 64, 64, 8],
 ];
 
-/// The map of docs/model-format.md written as plainly as possible.
-fn reference(dense: &[(Vec<f64>, Vec<f64>)], z: &[f64; 10]) -> [f64; 8] {
+const DT: f64 = 0.05;
+
+/// The map of docs/model-format.md written as plainly as possible: the network on all 11
+/// features, plus the kinematic base dt·[0, 0, 0, 0, p, r, vx, vy].
+fn reference(dense: &[(Vec<f64>, Vec<f64>)], z: &[f64; 11]) -> [f64; 8] {
     let [im, is, om, os] = statistics();
-    let mut h: Vec<f64> = (0..10).map(|j| (z[j] - im[j]) / is[j]).collect();
+    let mut h: Vec<f64> = (0..11).map(|j| (z[j] - im[j]) / is[j]).collect();
     for (l, (w, b)) in dense.iter().enumerate() {
         let n_in = h.len();
         let mut y: Vec<f64> = b
@@ -33,7 +36,13 @@ fn reference(dense: &[(Vec<f64>, Vec<f64>)], z: &[f64; 10]) -> [f64; 8] {
         }
         h = y;
     }
-    std::array::from_fn(|k| om[k] + os[k] * h[k])
+    let base = [0.0, 0.0, 0.0, 0.0, z[3], z[2], z[0], z[1]];
+    std::array::from_fn(|k| om[k] + os[k] * h[k] + DT * base[k])
+}
+
+/// The 11 features: the model's 10 per-step ones and μ.
+fn with_mu(z: &[f64; 10], mu: f64) -> [f64; 11] {
+    std::array::from_fn(|j| if j < 10 { z[j] } else { mu })
 }
 
 fn random_case(rng: &mut ChaCha8Rng) -> (TargetState, TargetInput, ContactInput) {
@@ -92,17 +101,26 @@ fn forward_matches_the_plain_reference() {
             assert_eq!(m.layers(), widths);
             for _ in 0..50 {
                 let (x, u, c) = random_case(&mut rng);
+                let mu = rng.random_range(0.15..=1.0);
+                m.set_mu(mu).unwrap();
                 let z = SurrogateModel::features(&x, &u, &c);
                 let o = m.forward(&z);
-                let r = reference(&dense, &z);
-                for k in 0..8 {
-                    let tol = 1e-12 * r[k].abs().max(1.0);
-                    assert!(
-                        (o[k] - r[k]).abs() <= tol,
-                        "{widths:?} {kernel:?} o[{k}] = {} vs {}",
-                        o[k],
-                        r[k]
-                    );
+                let r = reference(&dense, &with_mu(&z, mu));
+                // All 11 features at once, μ outside the trained range too (the raw map).
+                let mu_raw = rng.random_range(0.0..2.0);
+                let o_raw = m.forward_features(&with_mu(&z, mu_raw));
+                let r_raw = reference(&dense, &with_mu(&z, mu_raw));
+                assert_eq!(m.mu(), mu, "forward_features leaves the model's mu");
+                for (o, r) in [(o, r), (o_raw, r_raw)] {
+                    for k in 0..8 {
+                        let tol = 1e-12 * r[k].abs().max(1.0);
+                        assert!(
+                            (o[k] - r[k]).abs() <= tol,
+                            "{widths:?} {kernel:?} o[{k}] = {} vs {}",
+                            o[k],
+                            r[k]
+                        );
+                    }
                 }
             }
         }
@@ -112,13 +130,15 @@ fn forward_matches_the_plain_reference() {
 #[test]
 fn step_follows_the_next_state_formula() {
     let mut rng = ChaCha8Rng::seed_from_u64(12);
-    let widths = [10, 16, 8];
+    let widths = [11, 16, 8];
     let dense = random_dense(&widths, &mut rng);
     let mut m =
         SurrogateModel::from_bytes(&teacher("picopinn", &widths, &dense).to_bytes()).unwrap();
     assert_eq!(m.name(), "picopinn");
     assert_eq!(m.dt(), 0.05);
-    assert_eq!(m.param_count(), 10 * 16 + 16 + 16 * 8 + 8);
+    assert_eq!(m.param_count(), 11 * 16 + 16 + 16 * 8 + 8);
+    assert_eq!(m.mu(), 0.9, "the file's mu_default");
+    assert_eq!(m.mu_range(), (0.15, 1.0));
     for _ in 0..20 {
         let (x, u, c) = random_case(&mut rng);
         // Features by hand: the force in the body frame and its moment.
@@ -136,7 +156,9 @@ fn step_follows_the_next_state_formula() {
                 "feature {j}"
             );
         }
-        let o = reference(&dense, &z);
+        let mu = rng.random_range(0.15..=1.0);
+        m.set_mu(mu).unwrap();
+        let o = reference(&dense, &with_mu(&z, mu));
         let next = m.step(&x, &u, &c);
         let (s, co) = x[2].sin_cos();
         let expect = [
@@ -224,7 +246,7 @@ fn jacobians_match_central_differences() {
 #[test]
 fn kernels_and_modes_agree() {
     let mut rng = ChaCha8Rng::seed_from_u64(14);
-    let widths = [10, 64, 64, 64, 8];
+    let widths = [11, 64, 64, 64, 8];
     let bytes = teacher("pinn", &widths, &random_dense(&widths, &mut rng)).to_bytes();
     let mut models: Vec<SurrogateModel> = VARIANTS
         .iter()
@@ -252,7 +274,7 @@ fn kernels_and_modes_agree() {
 #[test]
 fn clustered_and_teacher_layouts_are_identical() {
     let mut rng = ChaCha8Rng::seed_from_u64(15);
-    for widths in [&[10, 24, 24, 24, 8][..], &[10, 32, 32, 8]] {
+    for widths in [&[11, 24, 24, 24, 8][..], &[11, 32, 32, 8]] {
         let (spec, dense) = clustered(widths, 40, &mut rng);
         assert!(
             dense.iter().any(|(w, _)| w.contains(&0.0)),
@@ -301,4 +323,38 @@ fn fma_kernels_agree_bit_for_bit() {
             }
         }
     }
+}
+
+/// μ changes the prediction, is refused outside the trained range (the model keeps its
+/// previous μ), and `with_mu` equals `set_mu`.
+#[test]
+fn mu_is_a_checked_property_of_the_model() {
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    let widths = [11, 24, 24, 8];
+    let bytes = teacher("pinn", &widths, &random_dense(&widths, &mut rng)).to_bytes();
+    let mut m = SurrogateModel::from_bytes(&bytes).unwrap();
+    let (x, u, c) = random_case(&mut rng);
+    let at_default = m.step(&x, &u, &c);
+    for bad in [0.1, 1.2, -0.5, f64::NAN, f64::INFINITY] {
+        let e = m.set_mu(bad).unwrap_err();
+        assert!(e.to_string().contains("mu"), "{e}");
+        assert!(e.to_string().contains("mu_range"), "{e}");
+        assert_eq!(m.mu(), 0.9);
+    }
+    assert_eq!(m.step(&x, &u, &c), at_default);
+    m.set_mu(0.3).unwrap();
+    let low = m.step(&x, &u, &c);
+    assert_ne!(low, at_default, "mu is an input of the network");
+    let mut w = SurrogateModel::from_bytes(&bytes)
+        .unwrap()
+        .with_mu(0.3)
+        .unwrap();
+    assert_eq!(w.step(&x, &u, &c), low);
+    assert!(SurrogateModel::from_bytes(&bytes)
+        .unwrap()
+        .with_mu(1.01)
+        .is_err());
+    // Back to the default reproduces the first prediction bit for bit.
+    m.set_mu(0.9).unwrap();
+    assert_eq!(m.step(&x, &u, &c), at_default);
 }

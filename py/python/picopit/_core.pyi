@@ -190,12 +190,24 @@ class FourDofTarget:
 
 class SurrogateModel:
     """A learned target surrogate (teacher PINN or PicoPINN) loaded from a ``picopit-mlp``
-    v1 safetensors file (docs/model-format.md): state ``[vx, vy, yaw, r, p, phi, X, Y]``,
-    input ``[delta, T_b]``, one step of the file's ``dt`` per call."""
+    v2 safetensors file (docs/model-format.md): state ``[vx, vy, yaw, r, p, phi, X, Y]``,
+    input ``[delta, T_b]``, one step of the file's ``dt`` per call, on a road of adhesion
+    ``mu`` (a property of the instance, as for :class:`FourDofTarget`)."""
 
-    def __init__(self, path: Union[str, os.PathLike[str]]) -> None:
+    def __init__(self, path: Union[str, os.PathLike[str]], mu: Optional[float] = None) -> None:
         """Load and validate the file (the GIL is released meanwhile). A file that cannot
-        be used raises ModelError naming the metadata key or tensor at fault."""
+        be used raises ModelError naming the metadata key or tensor at fault. ``mu``
+        defaults to the file's ``mu_default``; outside the file's ``mu_range`` it raises
+        ModelError naming ``mu``."""
+    @property
+    def mu(self) -> float:
+        """Road adhesion μ, the network's last input. Setting it outside ``mu_range``
+        raises ModelError (the previous μ stays)."""
+    @mu.setter
+    def mu(self, value: float) -> None: ...
+    @property
+    def mu_range(self) -> Tuple[float, float]:
+        """``(lo, hi)``: the road adhesion the model was trained on (the file's ``mu_range``)."""
     @property
     def name(self) -> str:
         """``pinn`` or ``picopinn`` (the file's ``kind``)."""
@@ -207,7 +219,7 @@ class SurrogateModel:
         """Free parameters, ``len(theta)``."""
     @property
     def layers(self) -> List[int]:
-        """Layer widths, input first (``[10, ..., 8]``)."""
+        """Layer widths, input first (``[11, ..., 8]``)."""
     @property
     def metadata(self) -> Dict[str, str]:
         """Every key of the file's header metadata."""
@@ -231,9 +243,9 @@ class SurrogateModel:
         """``(x_next (8,), A (8, 8), B (8, 2), F (8, 2))``, F with ``gamma`` and ``point``
         held fixed."""
     def forward(self, features: _ArrayLike) -> _F64:
-        """The raw de-normalised network output ``o = [dvx, dvy, dr, dp, dphi, dpsi, dx_b,
-        dy_b]`` (8,) for ``features = [vx, vy, r, p, phi, delta, T_b, f_bx, f_by, M_z]``
-        (10,)."""
+        """The increments ``o = [dvx, dvy, dr, dp, dphi, dpsi, dx_b, dy_b]`` (8,), kinematic
+        base included, for ``features = [vx, vy, r, p, phi, delta, T_b, f_bx, f_by, M_z, mu]``
+        (11,); μ comes from the features (not range-checked) and ``self.mu`` is unchanged."""
 
 class MpcTimes(TypedDict):
     linearise: float

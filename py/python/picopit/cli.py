@@ -288,6 +288,15 @@ def _provenance(ds, seed: int, config: Dict[str, Any]) -> Dict[str, Any]:
             "command": _command_line(_ARGV), "train_config": config}
 
 
+def _mu_range(ds) -> tuple:
+    """The road-μ span the model was trained on: the sampling range of the data (or, for a
+    dataset without one, the span of its μ values)."""
+    mu = ds.manifest.get("sampling", {}).get("mu")
+    if mu is None:
+        return float(ds.arrays["mu"].min()), float(ds.arrays["mu"].max())
+    return float(mu[0]), float(mu[1])
+
+
 def _cmd_train(args: argparse.Namespace) -> int:
     from . import datagen
     from .surrogate_nn import save_model
@@ -302,7 +311,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     out = Path(args.out)
     model, info = train_teacher(ds, cfg, out, progress=not args.no_progress)
     path = Path(args.model) if args.model else out / "pinn.safetensors"
-    save_model(model, path, kind="pinn", dt=float(ds.manifest["dt"]), param_set=ds.param_set,
+    save_model(model, path, kind="pinn", param_set=ds.param_set, mu_range=_mu_range(ds),
                provenance=_provenance(ds, cfg.seed, info["config"]))
     v = info["val"]
     print(f"train: {model.param_count} parameters, {cfg.epochs} epochs in {info['seconds']:.0f} s; val one-step "
@@ -324,6 +333,10 @@ def _cmd_compress(args: argparse.Namespace) -> int:
         from .datagen import DatasetError
 
         raise DatasetError(f"param_set: teacher {args.teacher} is {meta['param_set']!r}, data {ds.param_set!r}")
+    if abs(teacher.dt - float(ds.manifest["dt"])) > 1e-12:
+        from .datagen import DatasetError
+
+        raise DatasetError(f"dt: teacher {args.teacher} steps {teacher.dt} s, data {ds.manifest['dt']} s")
     cfg = CompressConfig(
         student=parse_layers(args.student), budget=args.budget, distil_epochs=args.distil_epochs,
         retrain_epochs=args.retrain_epochs, w_physics=0.0 if args.no_physics else args.w_physics,
@@ -334,7 +347,7 @@ def _cmd_compress(args: argparse.Namespace) -> int:
     path = Path(args.model) if args.model else out / "picopinn.safetensors"
     config = dict(info["config"], teacher=str(args.teacher), teacher_data_hash=meta.get("data_hash", ""),
                   threshold=info["clustering"]["threshold"])
-    save_model(pico, path, kind="picopinn", dt=float(ds.manifest["dt"]), param_set=ds.param_set,
+    save_model(pico, path, kind="picopinn", param_set=ds.param_set, mu_range=_mu_range(ds),
                provenance=_provenance(ds, cfg.seed, config))
     v, vt = info["val"], info["val_teacher"]
     print(f"compress: student {info['student_params']} -> {pico.param_count} free parameters "

@@ -28,21 +28,21 @@ import torch
 from . import load_params_dict
 from .datagen import Dataset
 from .physics import FourDof
-from .surrogate_nn import GatherMLP, dense_mlp
-from .train import (Split, TrainError, evaluate, fit, physics_targets, plot_curves, prepare,
+from .surrogate_nn import N_IN, N_OUT, GatherMLP, dense_mlp
+from .train import (LOSS_SCALES, Split, TrainError, evaluate, fit, physics_targets, plot_curves, prepare,
                     supervised_loss, weight_norm)
 
 
 @dataclass
 class CompressConfig:
-    student: Tuple[int, ...] = (10, 32, 32, 8)
+    student: Tuple[int, ...] = (11, 32, 32, 8)
     budget: int = 812
-    distil_epochs: int = 20
+    distil_epochs: int = 40
     distil_lr: float = 3e-3
     norm_penalty: float = 1e-3
     prune: float = 0.02
     """Centres below this fraction of the tensor's max |w| are pruned (sign 0)."""
-    retrain_epochs: int = 30
+    retrain_epochs: int = 80
     retrain_lr: float = 2e-3
     lr_final: float = 1e-4
     batch: int = 1024
@@ -52,6 +52,7 @@ class CompressConfig:
     horizon: int = 4
     rollout_batch: int = 256
     collocation: float = 0.5
+    loss_scale: str = "geometric"
     seed: int = 0
 
     def validate(self) -> "CompressConfig":
@@ -59,8 +60,8 @@ class CompressConfig:
             return TrainError(f"{name} = {getattr(self, name)!r}: {why}")
 
         s = self.student
-        if len(s) < 3 or s[0] != 10 or s[-1] != 8 or min(s) < 1:
-            raise bad("student", "widths from 10 inputs to 8 outputs with at least one hidden layer")
+        if len(s) < 3 or s[0] != N_IN or s[-1] != N_OUT or min(s) < 1:
+            raise bad("student", f"widths from {N_IN} inputs to {N_OUT} outputs with at least one hidden layer")
         biases = sum(s[1:])
         if isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget <= biases:
             raise bad("budget", f"must be an integer above the student's {biases} biases")
@@ -74,6 +75,8 @@ class CompressConfig:
         for name in ("norm_penalty", "w_data", "w_rollout", "w_physics", "collocation"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise bad(name, "must be >= 0")
+        if self.loss_scale not in LOSS_SCALES:
+            raise bad("loss_scale", f"must be one of {', '.join(LOSS_SCALES)}")
         if not 0 <= self.prune < 1:
             raise bad("prune", "must lie in [0, 1)")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
@@ -174,7 +177,7 @@ def compressed_model(student: GatherMLP, clusters: Sequence[TensorClusters], t: 
                            "pruned": int((s == 0).sum()), "threshold_abs": t * c.scale})
     theta = torch.from_numpy(np.concatenate(thetas))
     m = GatherMLP(student.layers, theta, idx, sign, student.in_mean.numpy(), student.in_std.numpy(),
-                  student.out_mean.numpy(), student.out_std.numpy())
+                  student.out_mean.numpy(), student.out_std.numpy(), student.dt)
     return m, {"threshold": t, "free": m.param_count, "tensors": per_tensor}
 
 
@@ -225,7 +228,7 @@ def compress(teacher: GatherMLP, ds: Dataset, cfg: CompressConfig, out: Path,
 
     # 1. Distillation on the teacher's outputs (samples and collocation inputs), + norm penalty.
     stats = {k: getattr(teacher, k).numpy() for k in ("in_mean", "in_std", "out_mean", "out_std")}
-    student = dense_mlp(cfg.student, stats, cfg.seed + 1)
+    student = dense_mlp(cfg.student, stats, cfg.seed + 1, teacher.dt)
     z_all = torch.cat([tr.z, phys.z])
     with torch.no_grad():
         y_teacher = teacher(z_all)
@@ -252,7 +255,8 @@ def compress(teacher: GatherMLP, ds: Dataset, cfg: CompressConfig, out: Path,
 
     # 3. Retraining θ_free with data + physics.
     h_retrain = fit(pico, supervised_loss(pico, tr, phys if cfg.w_physics > 0 else None, cfg.w_data,
-                                          cfg.w_rollout, cfg.w_physics, cfg.horizon, cfg.batch),
+                                          cfg.w_rollout, cfg.w_physics, cfg.horizon, cfg.batch,
+                                          cfg.loss_scale),
                     len(tr), len(tr.win), lambda: evaluate(pico, va, cfg.horizon),
                     epochs=cfg.retrain_epochs, batch=cfg.batch, rollout_batch=cfg.rollout_batch,
                     lr=cfg.retrain_lr, lr_final=cfg.lr_final, seed=cfg.seed + 2, desc="retrain",

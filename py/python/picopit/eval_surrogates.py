@@ -8,9 +8,10 @@ test episodes.
   start every ``stride`` steps of every test episode; RMSE over all rollout steps and the
   error at the end.
 
-The 4-DOF model is the Rust ``FourDofTarget`` (given the episode's road μ). The learned
-models run through the Rust ``SurrogateModel`` when the extension has it, otherwise through
-the PyTorch implementation of the same file (``backend`` in the results says which).
+Every model is given the episode's road μ: the Rust ``FourDofTarget`` at construction, the
+learned models (format version 2, μ is their last feature) through ``SurrogateModel.mu``. The
+learned models run through the Rust ``SurrogateModel`` when the extension has it, otherwise
+through the PyTorch implementation of the same file (``backend`` in the results says which).
 Timings: microseconds per single-state ``step`` call from Python (including the binding's
 overhead), and per ``step_jac`` where the backend has it.
 """
@@ -85,19 +86,23 @@ def _learned(name: str, path: Path) -> _Batched:
         def step(x, u, fc, gamma, point, mu):
             out = np.empty_like(x)
             for i in range(len(x)):
+                if rm.mu != mu[i]:
+                    rm.mu = float(mu[i])  # one road per episode: set when it changes
                 out[i] = rm.step(x[i], u[i], fc[i], float(gamma[i]), point[i])
             return out
 
         return _Batched(name, step, int(rm.param_count), "rust", rm.step, rm.step_jac)
-    tm, _ = load_model(path)
+    tm, meta = load_model(path)
+
+    mu0 = float(meta["mu_default"])
 
     @torch.no_grad()
     def tstep(x, u, fc, gamma, point, mu):
         t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64))  # noqa: E731
-        return tm.step(t(x), t(u), t(fc), t(gamma), t(point)).numpy()
+        return tm.step(t(x), t(u), t(fc), t(gamma), t(point), t(mu)).numpy()
 
     def single(x, u, fc, gamma, point):
-        return tstep(x[None], u[None], fc[None], np.array([gamma]), point[None], None)[0]
+        return tstep(x[None], u[None], fc[None], np.array([gamma]), point[None], np.array([mu0]))[0]
 
     return _Batched(name, tstep, tm.param_count, "torch", single)
 

@@ -1,8 +1,10 @@
 """Learned target surrogates in PyTorch (float64) and their model files.
 
 The network and its file are exactly those of ``docs/model-format.md`` (format
-``picopit-mlp`` version 1): 10 position- and heading-invariant features, a tanh MLP on
-normalised features, 8 de-normalised increments, the next state by the stated formulas.
+``picopit-mlp`` version 2): 11 position- and heading-invariant features (the last is the road
+adhesion μ, a property of the model instance), a tanh MLP on normalised features, 8
+de-normalised increments added to the explicit-Euler kinematic increments
+``dt·[0, 0, 0, 0, p, r, vx, vy]``, the next state by the stated formulas.
 Every layer's weights are a gather ŵ = sign ⊙ θ[idx] from one free-parameter vector θ; the
 teacher PINN is the special case R = identity.
 """
@@ -20,12 +22,16 @@ import numpy as np
 import torch
 
 FORMAT = "picopit-mlp"
-VERSION = "1"
-FEATURES = ("vx", "vy", "r", "p", "phi", "delta", "T_b", "f_bx", "f_by", "M_z")
+VERSION = "2"
+FEATURES = ("vx", "vy", "r", "p", "phi", "delta", "T_b", "f_bx", "f_by", "M_z", "mu")
 OUTPUTS = ("dvx", "dvy", "dr", "dp", "dphi", "dpsi", "dx_b", "dy_b")
 N_IN, N_OUT = len(FEATURES), len(OUTPUTS)
 REQUIRED_KEYS = ("format", "version", "kind", "activation", "layers", "features", "outputs",
-                 "dt", "param_set")
+                 "dt", "param_set", "mu_range", "mu_default")
+#: Which feature's explicit-Euler increment ``dt·z_j`` is the kinematic base of each output
+#: (−1: none): Δφ ← p, Δψ ← r, Δx_b ← vx, Δy_b ← vy.
+BASE_FEATURE = (-1, -1, -1, -1, 3, 2, 0, 1)
+MU_DEFAULT = 0.9
 KINDS = ("pinn", "picopinn")
 
 
@@ -39,14 +45,23 @@ class ModelFileError(ValueError):
 
 
 def features(x: torch.Tensor, u: torch.Tensor, fc: torch.Tensor, gamma: torch.Tensor,
-             point: torch.Tensor) -> torch.Tensor:
-    """z (B, 10) from state x (B, 8), input u (B, 2), contact fc (B, 2), γ (B,), point (B, 2)."""
+             point: torch.Tensor, mu) -> torch.Tensor:
+    """z (B, 11) from state x (B, 8), input u (B, 2), contact fc (B, 2), γ (B,), point (B, 2)
+    and road μ (B,) or a scalar."""
     a = gamma - x[:, 2]
     s, c = torch.sin(a), torch.cos(a)
     fbx = c * fc[:, 0] - s * fc[:, 1]
     fby = s * fc[:, 0] + c * fc[:, 1]
     mz = point[:, 0] * fby - point[:, 1] * fbx
-    return torch.stack([x[:, 0], x[:, 1], x[:, 3], x[:, 4], x[:, 5], u[:, 0], u[:, 1], fbx, fby, mz], dim=1)
+    mu = torch.as_tensor(mu, dtype=x.dtype).expand(x.shape[0])
+    return torch.stack([x[:, 0], x[:, 1], x[:, 3], x[:, 4], x[:, 5], u[:, 0], u[:, 1], fbx, fby, mz, mu], dim=1)
+
+
+def kinematic_base(z: torch.Tensor, dt: float) -> torch.Tensor:
+    """The explicit-Euler kinematic increments dt·[0, 0, 0, 0, p, r, vx, vy] (B, 8) of
+    features z: the part of the increments the network does not have to learn."""
+    zero = torch.zeros_like(z[:, 0])
+    return torch.stack([dt * z[:, j] if j >= 0 else zero for j in BASE_FEATURE], dim=1)
 
 
 def apply_increments(x: torch.Tensor, o: torch.Tensor) -> torch.Tensor:
@@ -84,9 +99,10 @@ class GatherMLP(torch.nn.Module):
     def __init__(self, layers: Sequence[int], theta: torch.Tensor,
                  idx: List[Tuple[torch.Tensor, torch.Tensor]],
                  sign: List[Tuple[torch.Tensor, torch.Tensor]],
-                 in_mean, in_std, out_mean, out_std):
+                 in_mean, in_std, out_mean, out_std, dt: float):
         super().__init__()
         self.layers = [int(w) for w in layers]
+        self.dt = float(dt)
         self.theta = torch.nn.Parameter(theta.detach().clone().to(torch.float64))
         for l, ((wi, bi), (ws, bs)) in enumerate(zip(idx, sign), start=1):
             self.register_buffer(f"w_idx{l}", wi.to(torch.long))
@@ -118,13 +134,18 @@ class GatherMLP(torch.nn.Module):
                 h = torch.tanh(h)
         return h
 
-    def forward(self, z: torch.Tensor) -> torch.Tensor:
-        """Outputs o (B, 8) from raw features z (B, 10)."""
+    def residual(self, z: torch.Tensor) -> torch.Tensor:
+        """The learned part of the increments, out_mean + out_std ⊙ y (B, 8)."""
         y = self.forward_normalised((z - self.in_mean) / self.in_std)
         return self.out_mean + self.out_std * y
 
-    def step(self, x, u, fc, gamma, point) -> torch.Tensor:
-        return apply_increments(x, self(features(x, u, fc, gamma, point)))
+    def forward(self, z: torch.Tensor) -> torch.Tensor:
+        """Increments o (B, 8) from raw features z (B, 11): the kinematic base plus the
+        learned residual."""
+        return kinematic_base(z, self.dt) + self.residual(z)
+
+    def step(self, x, u, fc, gamma, point, mu) -> torch.Tensor:
+        return apply_increments(x, self(features(x, u, fc, gamma, point, mu)))
 
     @property
     def param_count(self) -> int:
@@ -143,7 +164,7 @@ class GatherMLP(torch.nn.Module):
         return t
 
 
-def dense_mlp(layers: Sequence[int], stats: Mapping[str, np.ndarray], seed: int) -> GatherMLP:
+def dense_mlp(layers: Sequence[int], stats: Mapping[str, np.ndarray], seed: int, dt: float) -> GatherMLP:
     """A plain (R = identity) MLP with Xavier-initialised weights and zero biases."""
     g = torch.Generator().manual_seed(int(seed))
     thetas, idx, sign = [], [], []
@@ -160,13 +181,13 @@ def dense_mlp(layers: Sequence[int], stats: Mapping[str, np.ndarray], seed: int)
         idx.append((wi, bi))
         sign.append((torch.ones(n_out, n_in), torch.ones(n_out)))
     return GatherMLP(layers, torch.cat(thetas), idx, sign, stats["in_mean"], stats["in_std"],
-                     stats["out_mean"], stats["out_std"])
+                     stats["out_mean"], stats["out_std"], dt)
 
 
 def dense_from_weights(layers: Sequence[int], weights: List[Tuple[torch.Tensor, torch.Tensor]],
                        like: GatherMLP) -> GatherMLP:
     """An identity-R model holding the given expanded weights, with ``like``'s statistics."""
-    m = dense_mlp(layers, {k: getattr(like, k).numpy() for k in ("in_mean", "in_std", "out_mean", "out_std")}, 0)
+    m = dense_mlp(layers, {k: getattr(like, k).numpy() for k in ("in_mean", "in_std", "out_mean", "out_std")}, 0, like.dt)
     with torch.no_grad():
         m.theta.copy_(torch.cat([torch.cat([w.reshape(-1), b]) for w, b in weights]))
     return m
@@ -191,13 +212,19 @@ def git_commit(cwd: Optional[Path] = None) -> str:
     return "unknown"
 
 
-def save_model(model: GatherMLP, path: Path, *, kind: str, dt: float, param_set: str,
-               provenance: Mapping[str, Any]) -> None:
-    """Write ``model`` as a ``picopit-mlp`` v1 safetensors file with provenance metadata."""
+def save_model(model: GatherMLP, path: Path, *, kind: str, param_set: str,
+               mu_range: Tuple[float, float], provenance: Mapping[str, Any],
+               mu_default: Optional[float] = None) -> None:
+    """Write ``model`` as a ``picopit-mlp`` v2 safetensors file with provenance metadata;
+    ``mu_range`` is the road adhesion span of the training data, ``mu_default`` the μ a
+    reader uses until told the road's (default :data:`MU_DEFAULT` clamped into the range)."""
     from safetensors.numpy import save_file
 
     if kind not in KINDS:
         raise ModelFileError(f"kind = {kind!r}: must be one of {', '.join(KINDS)}")
+    if mu_default is None:
+        mu_default = min(max(MU_DEFAULT, float(mu_range[0])), float(mu_range[1]))
+    dt = model.dt
     if not (dt > 0 and math.isfinite(dt)):
         raise ModelFileError(f"dt = {dt!r}: must be > 0")
     meta = {
@@ -205,6 +232,7 @@ def save_model(model: GatherMLP, path: Path, *, kind: str, dt: float, param_set:
         "layers": ",".join(str(w) for w in model.layers),
         "features": ",".join(FEATURES), "outputs": ",".join(OUTPUTS),
         "dt": repr(float(dt)), "param_set": str(param_set),
+        "mu_range": f"{float(mu_range[0])!r},{float(mu_range[1])!r}", "mu_default": repr(float(mu_default)),
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
     for k, v in provenance.items():
@@ -219,17 +247,22 @@ def _validate(t: Mapping[str, np.ndarray], meta: Mapping[str, str], where: str) 
     def bad(name: str, why: str) -> ModelFileError:
         return ModelFileError(f"{where}: {name}: {why}")
 
-    for k in REQUIRED_KEYS:
+    # Format and version first: a file of another version may differ in anything else.
+    for k in ("format", "version"):
         if k not in meta:
             raise bad(k, "required metadata key missing")
     if meta["format"] != FORMAT:
         raise bad("format", f"{meta['format']!r} is not {FORMAT!r}")
     if meta["version"] != VERSION:
-        raise bad("version", f"unknown version {meta['version']!r} (this reader knows {VERSION})")
+        raise bad("version", f"unknown version {meta['version']!r} (this reader knows {VERSION}; "
+                             "regenerate older files with models/regenerate.sh)")
+    for k in REQUIRED_KEYS:
+        if k not in meta:
+            raise bad(k, "required metadata key missing")
     if meta["kind"] not in KINDS:
         raise bad("kind", f"{meta['kind']!r} is not one of {', '.join(KINDS)}")
     if meta["activation"] != "tanh":
-        raise bad("activation", f"{meta['activation']!r}: only tanh in version 1")
+        raise bad("activation", f"{meta['activation']!r}: only tanh in version 2")
     if meta["features"] != ",".join(FEATURES):
         raise bad("features", f"must be {','.join(FEATURES)}")
     if meta["outputs"] != ",".join(OUTPUTS):
@@ -240,6 +273,13 @@ def _validate(t: Mapping[str, np.ndarray], meta: Mapping[str, str], where: str) 
         raise bad("dt", f"{meta['dt']!r} is not a number") from None
     if not (dt > 0 and math.isfinite(dt)):
         raise bad("dt", f"{meta['dt']!r}: must be > 0")
+    mu_lo, mu_hi = parse_mu_range(meta["mu_range"], bad)
+    try:
+        mu_def = float(meta["mu_default"])
+    except ValueError:
+        raise bad("mu_default", f"{meta['mu_default']!r} is not a number") from None
+    if not (mu_lo <= mu_def <= mu_hi):
+        raise bad("mu_default", f"{meta['mu_default']!r}: must lie in mu_range [{mu_lo}, {mu_hi}]")
     try:
         layers = [int(w) for w in meta["layers"].split(",")]
     except ValueError:
@@ -286,6 +326,18 @@ def _validate(t: Mapping[str, np.ndarray], meta: Mapping[str, str], where: str) 
     return layers
 
 
+def parse_mu_range(text: str, bad=None) -> Tuple[float, float]:
+    """``lo,hi`` with 0 < lo <= hi, both finite."""
+    bad = bad or (lambda name, why: ModelFileError(f"{name}: {why}"))
+    try:
+        lo, hi = (float(v) for v in str(text).split(","))
+    except ValueError:
+        raise bad("mu_range", f"{text!r} is not two comma-separated numbers lo,hi") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
+        raise bad("mu_range", f"{text!r}: must be finite with 0 < lo <= hi")
+    return lo, hi
+
+
 def load_model(path: Path) -> Tuple[GatherMLP, Dict[str, str]]:
     """Read and validate a model file; returns the torch model and its metadata."""
     from safetensors import SafetensorError
@@ -309,5 +361,5 @@ def load_model(path: Path) -> Tuple[GatherMLP, Dict[str, str]]:
         sign.append((torch.from_numpy(t[f"layer{l}.weight.sign"].astype(np.float64)),
                      torch.from_numpy(t[f"layer{l}.bias.sign"].astype(np.float64))))
     model = GatherMLP(layers, torch.from_numpy(t["theta"]), idx, sign, t["in_mean"], t["in_std"],
-                      t["out_mean"], t["out_std"])
+                      t["out_mean"], t["out_std"], float(meta["dt"]))
     return model, meta

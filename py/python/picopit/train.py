@@ -32,11 +32,13 @@ import torch
 from . import load_params_dict
 from .datagen import DT, Dataset, DatasetError, windows
 from .physics import FourDof
-from .surrogate_nn import GatherMLP, apply_increments, dense_mlp, features, increments
+from .surrogate_nn import (N_IN, N_OUT, GatherMLP, apply_increments, dense_mlp, features, increments,
+                          kinematic_base)
 
 #: Which increment std scales each state's error in the rollout loss
 #: (state order vx, vy, ψ, r, p, φ, X, Y → increment order dvx, dvy, dr, dp, dphi, dpsi, dx_b, dy_b).
 STATE_TO_OUT = (0, 1, 5, 2, 3, 4, 6, 7)
+LOSS_SCALES = ("geometric", "increment", "residual")
 
 
 class TrainError(ValueError):
@@ -45,8 +47,8 @@ class TrainError(ValueError):
 
 @dataclass
 class TrainConfig:
-    layers: Tuple[int, ...] = (10, 64, 64, 64, 8)
-    epochs: int = 40
+    layers: Tuple[int, ...] = (11, 64, 64, 64, 8)
+    epochs: int = 120
     batch: int = 1024
     lr: float = 3e-3
     lr_final: float = 1e-4
@@ -59,13 +61,15 @@ class TrainConfig:
     """Collocation points per training sample for the physics term."""
     seed: int = 0
     checkpoint_every: int = 10
+    loss_scale: str = "geometric"
+    """Error scale of the one-step loss per output (``output_scale``)."""
 
     def validate(self) -> "TrainConfig":
         def bad(name, why):
             return TrainError(f"{name} = {getattr(self, name)!r}: {why}")
 
-        if len(self.layers) < 3 or self.layers[0] != 10 or self.layers[-1] != 8 or min(self.layers) < 1:
-            raise bad("layers", "widths from 10 inputs to 8 outputs with at least one hidden layer")
+        if len(self.layers) < 3 or self.layers[0] != N_IN or self.layers[-1] != N_OUT or min(self.layers) < 1:
+            raise bad("layers", f"widths from {N_IN} inputs to {N_OUT} outputs with at least one hidden layer")
         for name in ("epochs", "batch", "horizon", "rollout_batch", "checkpoint_every"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -80,6 +84,8 @@ class TrainConfig:
                 raise bad(name, "must be >= 0")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise bad("seed", "must be a non-negative integer")
+        if self.loss_scale not in LOSS_SCALES:
+            raise bad("loss_scale", f"must be one of {', '.join(LOSS_SCALES)}")
         return self
 
 
@@ -87,7 +93,7 @@ def parse_layers(text: str) -> Tuple[int, ...]:
     try:
         return tuple(int(w) for w in str(text).split(","))
     except ValueError:
-        raise TrainError(f"layers = {text!r}: a comma-separated list of widths, e.g. 10,64,64,64,8") from None
+        raise TrainError(f"layers = {text!r}: a comma-separated list of widths, e.g. 11,64,64,64,8") from None
 
 
 # --------------------------------------------------------------------------------------
@@ -112,7 +118,7 @@ class Split:
     def of(cls, a: Mapping[str, np.ndarray], horizon: int) -> "Split":
         t = {k: torch.from_numpy(np.ascontiguousarray(a[k], dtype=np.float64))
              for k in ("x", "u", "fc", "gamma", "point", "x_next", "mu")}
-        z = features(t["x"], t["u"], t["fc"], t["gamma"], t["point"])
+        z = features(t["x"], t["u"], t["fc"], t["gamma"], t["point"], t["mu"])
         o = increments(t["x"], t["x_next"])
         return cls(z=z, o=o, win=torch.from_numpy(windows(a, horizon)), **t)
 
@@ -120,8 +126,9 @@ class Split:
         return int(self.x.shape[0])
 
 
-def stats_of(s: Split) -> Dict[str, np.ndarray]:
-    """Feature and output normalisation from the training split (std floored, never 0)."""
+def stats_of(s: Split, dt: float) -> Dict[str, np.ndarray]:
+    """Feature normalisation, and the normalisation of the learned residual (the increments
+    minus their kinematic base), from the training split (std floored, never 0)."""
     def mean_std(a: torch.Tensor):
         m = a.mean(0).numpy()
         sd = a.std(0).numpy()
@@ -129,7 +136,7 @@ def stats_of(s: Split) -> Dict[str, np.ndarray]:
         return m, sd
 
     im, isd = mean_std(s.z)
-    om, osd = mean_std(s.o)
+    om, osd = mean_std(s.o - kinematic_base(s.z, dt))
     return {"in_mean": im, "in_std": isd, "out_mean": om, "out_std": osd}
 
 
@@ -162,7 +169,7 @@ def physics_targets(s: Split, model4: FourDof, collocation: float, seed: int) ->
     x, u, fc, gamma, point, mu = (torch.cat(v) for v in (xs, us, fcs, gs, ps, mus))
     with torch.no_grad():
         xn = model4.step(x, u, fc, gamma, point, mu)
-    return PhysicsTargets(z=features(x, u, fc, gamma, point), o=increments(x, xn))
+    return PhysicsTargets(z=features(x, u, fc, gamma, point, mu), o=increments(x, xn))
 
 
 # --------------------------------------------------------------------------------------
@@ -170,17 +177,27 @@ def physics_targets(s: Split, model4: FourDof, collocation: float, seed: int) ->
 # --------------------------------------------------------------------------------------
 
 
-def one_step_loss(model: GatherMLP, z: torch.Tensor, o: torch.Tensor) -> torch.Tensor:
-    return (((model(z) - o) / model.out_std) ** 2).mean()
+def one_step_loss(model: GatherMLP, z: torch.Tensor, o: torch.Tensor,
+                  scale: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """Mean squared increment error, each output divided by ``scale`` (default: the model's
+    output std)."""
+    return (((model(z) - o) / (model.out_std if scale is None else scale)) ** 2).mean()
 
 
-def rollout_loss(model: GatherMLP, s: Split, starts: torch.Tensor, horizon: int) -> torch.Tensor:
-    scale = model.out_std[list(STATE_TO_OUT)]
+def increment_scale(s: Split) -> torch.Tensor:
+    """Per state (vx, vy, ψ, r, p, φ, X, Y), the std of its one-step increment over the split
+    (whole increments, kinematic base included): the error scale of the rollout loss."""
+    sd = s.o.std(0)
+    return torch.where(sd > 1e-12, sd, torch.ones_like(sd))[list(STATE_TO_OUT)]
+
+
+def rollout_loss(model: GatherMLP, s: Split, starts: torch.Tensor, horizon: int,
+                 scale: torch.Tensor) -> torch.Tensor:
     x = s.x[starts]
     total = 0.0
     for j in range(horizon):
         k = starts + j
-        x = model.step(x, s.u[k], s.fc[k], s.gamma[k], s.point[k])
+        x = model.step(x, s.u[k], s.fc[k], s.gamma[k], s.point[k], s.mu[k])
         err = (x - s.x_next[k]) / (scale * (j + 1))
         total = total + (err ** 2).mean()
     return total / horizon
@@ -202,7 +219,7 @@ def evaluate(model: GatherMLP, s: Split, horizon: int = 4, max_windows: int = 20
     errs = []
     for j in range(horizon):
         k = w + j
-        x = model.step(x, s.u[k], s.fc[k], s.gamma[k], s.point[k])
+        x = model.step(x, s.u[k], s.fc[k], s.gamma[k], s.point[k], s.mu[k])
         errs.append(x[:, 2] - s.x_next[k, 2])
     rh = float(torch.sqrt((torch.stack(errs) ** 2).mean())) if len(w) else float("nan")
     return {"mse": mse, "heading_rmse_rad": hd, "rollout_heading_rmse_rad": rh}
@@ -285,26 +302,45 @@ def fit(
     return hist
 
 
+def output_scale(model: GatherMLP, tr: Split, how: str) -> torch.Tensor:
+    """Per output, the error scale of the one-step (data and physics) loss: ``increment``
+    the std of the whole increment, ``residual`` the std of the learned part (the model's
+    out_std), ``geometric`` their geometric mean (the default: measured best, see
+    docs/surrogates.md)."""
+    sd = tr.o.std(0)
+    sd = torch.where(sd > 1e-12, sd, torch.ones_like(sd))
+    if how == "increment":
+        return sd
+    if how == "residual":
+        return model.out_std
+    if how == "geometric":
+        return torch.sqrt(sd * model.out_std)
+    raise TrainError(f"loss_scale = {how!r}: must be one of {', '.join(LOSS_SCALES)}")
+
+
 def supervised_loss(model: GatherMLP, tr: Split, phys: Optional[PhysicsTargets], w_data: float,
-                    w_rollout: float, w_physics: float, horizon: int, batch: int):
+                    w_rollout: float, w_physics: float, horizon: int, batch: int,
+                    loss_scale: str = "geometric"):
     """The data + rollout + physics loss used by ``train`` and PicoPINN retraining."""
     n_phys = 0 if phys is None else int(phys.z.shape[0])
+    scale = increment_scale(tr)
+    oscale = output_scale(model, tr, loss_scale)
     g = torch.Generator().manual_seed(12345)
 
     def loss_fn(idx, widx):
         parts: Dict[str, float] = {}
         total = torch.zeros((), dtype=torch.float64)
         if w_data > 0:
-            l = one_step_loss(model, tr.z[idx], tr.o[idx])
+            l = one_step_loss(model, tr.z[idx], tr.o[idx], oscale)
             total = total + w_data * l
             parts["data"] = float(l.detach())
         if w_rollout > 0 and widx is not None and len(tr.win):
-            l = rollout_loss(model, tr, tr.win[widx], horizon)
+            l = rollout_loss(model, tr, tr.win[widx], horizon, scale)
             total = total + w_rollout * l
             parts["rollout"] = float(l.detach())
         if w_physics > 0 and n_phys:
             pi = torch.randint(0, n_phys, (batch,), generator=g)
-            l = one_step_loss(model, phys.z[pi], phys.o[pi])
+            l = one_step_loss(model, phys.z[pi], phys.o[pi], oscale)
             total = total + w_physics * l
             parts["physics"] = float(l.detach())
         parts["total"] = float(total.detach())
@@ -350,9 +386,10 @@ def train_teacher(ds: Dataset, cfg: TrainConfig, out: Path, progress: bool = Tru
     torch.manual_seed(cfg.seed)
     t0 = time.time()
     tr, va = prepare(ds, cfg.horizon)
-    stats = stats_of(tr)
-    model = dense_mlp(cfg.layers, stats, cfg.seed)
-    model4 = FourDof.from_params(load_params_dict(ds.param_set)["target"], dt=float(ds.manifest["dt"]))
+    dt = float(ds.manifest["dt"])
+    stats = stats_of(tr, dt)
+    model = dense_mlp(cfg.layers, stats, cfg.seed, dt)
+    model4 = FourDof.from_params(load_params_dict(ds.param_set)["target"], dt=dt)
     phys = physics_targets(tr, model4, cfg.collocation, cfg.seed) if cfg.w_physics > 0 else None
     out = Path(out)
     ckdir = out / "checkpoints"
@@ -366,7 +403,8 @@ def train_teacher(ds: Dataset, cfg: TrainConfig, out: Path, progress: bool = Tru
 
     hist = fit(
         model,
-        supervised_loss(model, tr, phys, cfg.w_data, cfg.w_rollout, cfg.w_physics, cfg.horizon, cfg.batch),
+        supervised_loss(model, tr, phys, cfg.w_data, cfg.w_rollout, cfg.w_physics, cfg.horizon, cfg.batch,
+                        cfg.loss_scale),
         len(tr), len(tr.win), lambda: evaluate(model, va, cfg.horizon),
         epochs=cfg.epochs, batch=cfg.batch, rollout_batch=cfg.rollout_batch, lr=cfg.lr,
         lr_final=cfg.lr_final, seed=cfg.seed, desc="train", progress=progress,

@@ -55,14 +55,16 @@ pub struct Spec {
     pub metadata: HashMap<String, String>,
 }
 
-pub const FEATURES: &str = "vx,vy,r,p,phi,delta,T_b,f_bx,f_by,M_z";
+pub const FEATURES: &str = "vx,vy,r,p,phi,delta,T_b,f_bx,f_by,M_z,mu";
 pub const OUTPUTS: &str = "dvx,dvy,dr,dp,dphi,dpsi,dx_b,dy_b";
 
 /// Plausible feature and output statistics of a full-size target (SI units).
 pub fn statistics() -> [Vec<f64>; 4] {
     [
-        vec![15.0, 0.0, 0.0, 0.0, 0.0, 0.0, 500.0, 0.0, 0.0, 0.0],
-        vec![6.0, 1.0, 0.4, 0.2, 0.03, 0.1, 800.0, 4000.0, 4000.0, 6000.0],
+        vec![15.0, 0.0, 0.0, 0.0, 0.0, 0.0, 500.0, 0.0, 0.0, 0.0, 0.55],
+        vec![
+            6.0, 1.0, 0.4, 0.2, 0.03, 0.1, 800.0, 4000.0, 4000.0, 6000.0, 0.25,
+        ],
         vec![-0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.75, 0.0],
         vec![0.3, 0.2, 0.1, 0.05, 0.01, 0.02, 0.3, 0.05],
     ]
@@ -76,7 +78,7 @@ pub fn metadata(kind: &str, widths: &[usize]) -> HashMap<String, String> {
         .join(",");
     [
         ("format", "picopit-mlp"),
-        ("version", "1"),
+        ("version", "2"),
         ("kind", kind),
         ("activation", "tanh"),
         ("layers", layers.as_str()),
@@ -84,6 +86,8 @@ pub fn metadata(kind: &str, widths: &[usize]) -> HashMap<String, String> {
         ("outputs", OUTPUTS),
         ("dt", "0.05"),
         ("param_set", "full_size"),
+        ("mu_range", "0.15,1.0"),
+        ("mu_default", "0.9"),
         ("seed", "7"),
     ]
     .into_iter()
@@ -174,8 +178,8 @@ pub fn clustered(widths: &[usize], n_free: usize, rng: &mut ChaCha8Rng) -> (Spec
 fn finish(kind: &str, widths: &[usize], theta: Vec<f64>, mut tensors: Vec<Raw>) -> Spec {
     let [im, is, om, os] = statistics();
     tensors.push(Raw::f64s("theta", &[theta.len()], &theta));
-    tensors.push(Raw::f64s("in_mean", &[10], &im));
-    tensors.push(Raw::f64s("in_std", &[10], &is));
+    tensors.push(Raw::f64s("in_mean", &[11], &im));
+    tensors.push(Raw::f64s("in_std", &[11], &is));
     tensors.push(Raw::f64s("out_mean", &[8], &om));
     tensors.push(Raw::f64s("out_std", &[8], &os));
     Spec {
