@@ -3,10 +3,13 @@
 # the teacher PINN, PicoPINN and the evaluation. Intermediate outputs (data, checkpoints,
 # curves) go to runs/surrogates/<set>; the model files, the evaluation JSON/Markdown and the
 # small figures are copied into models/<set>. Seeds are fixed: the same tree gives the same
-# files (PyTorch CPU, 2 threads). Usage: models/regenerate.sh [full_size] [half_scale]
+# files (PyTorch CPU, PICOPIT_THREADS threads). Usage: models/regenerate.sh [full_size] [half_scale]
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 SEED="${SEED:-0}"
+# One torch thread: on the shared 2-core machine two threads ran ~1.6x (and, next to one busy
+# compile, ~10x) slower than one; unloaded they gain ~15 %. See docs/surrogates.md.
+export PICOPIT_THREADS="${PICOPIT_THREADS:-1}"
 EPISODES="${EPISODES:-600}"
 SETS=("$@")
 [ ${#SETS[@]} -eq 0 ] && SETS=(full_size half_scale)

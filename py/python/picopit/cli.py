@@ -284,8 +284,11 @@ def _cmd_datagen(args: argparse.Namespace) -> int:
 def _provenance(ds, seed: int, config: Dict[str, Any]) -> Dict[str, Any]:
     from .surrogate_nn import git_commit
 
+    import torch
+
     return {"data_hash": ds.data_hash, "seed": str(seed), "git_commit": git_commit(),
-            "command": _command_line(_ARGV), "train_config": config}
+            "command": _command_line(_ARGV), "train_config": config,
+            "torch_threads": str(torch.get_num_threads())}
 
 
 def _mu_range(ds) -> tuple:

@@ -30,7 +30,7 @@ from .datagen import Dataset
 from .physics import FourDof
 from .surrogate_nn import N_IN, N_OUT, GatherMLP, dense_mlp
 from .train import (LOSS_SCALES, Split, TrainError, evaluate, fit, physics_targets, plot_curves, prepare,
-                    supervised_loss, weight_norm)
+                    supervised_loss, torch_threads, weight_norm)
 
 
 @dataclass
@@ -217,7 +217,7 @@ def plot_threshold(clusters: Sequence[TensorClusters], n_bias: int, prune: float
 def compress(teacher: GatherMLP, ds: Dataset, cfg: CompressConfig, out: Path,
              progress: bool = True) -> Tuple[GatherMLP, Dict[str, Any]]:
     cfg.validate()
-    torch.set_num_threads(2)
+    torch_threads()
     torch.manual_seed(cfg.seed)
     t0 = time.time()
     out = Path(out)

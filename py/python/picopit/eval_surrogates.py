@@ -30,6 +30,7 @@ import torch
 from . import _core
 from .datagen import Dataset, windows
 from .surrogate_nn import GatherMLP, load_model
+from .train import torch_threads
 
 MODELS = ("4dof", "pinn", "picopinn")
 
@@ -155,7 +156,7 @@ def evaluate_model(m: _Batched, a: Mapping[str, np.ndarray], horizon: int, strid
 
 def run(ds: Dataset, pinn: Path, picopinn: Path, horizon: int = 40, stride: int = 10,
         progress: bool = True) -> Dict[str, Any]:
-    torch.set_num_threads(2)
+    torch_threads()
     a = ds.subset("test")
     if len(a["x"]) == 0:
         from .datagen import DatasetError

@@ -89,6 +89,21 @@ class TrainConfig:
         return self
 
 
+def torch_threads() -> int:
+    """Set and return the torch CPU thread count: ``PICOPIT_THREADS`` (1 or 2), default 2.
+
+    On the shared 2-core machine one thread is the faster choice whenever another process
+    is busy: the tensors are small, and two OpenMP threads that wait on each other lose
+    far more to a preempted partner than they gain (docs/surrogates.md, measured)."""
+    import os
+
+    v = os.environ.get("PICOPIT_THREADS", "2")
+    if v.strip() not in ("1", "2"):
+        raise TrainError(f"PICOPIT_THREADS = {v!r}: must be 1 or 2")
+    torch.set_num_threads(int(v))
+    return int(v)
+
+
 def parse_layers(text: str) -> Tuple[int, ...]:
     try:
         return tuple(int(w) for w in str(text).split(","))
@@ -382,7 +397,7 @@ def prepare(ds: Dataset, horizon: int):
 def train_teacher(ds: Dataset, cfg: TrainConfig, out: Path, progress: bool = True) -> Tuple[GatherMLP, Dict[str, Any]]:
     """Train the teacher PINN on ``ds``; writes checkpoints and the curve figure into ``out``."""
     cfg.validate()
-    torch.set_num_threads(2)
+    torch_threads()
     torch.manual_seed(cfg.seed)
     t0 = time.time()
     tr, va = prepare(ds, cfg.horizon)
