@@ -94,8 +94,11 @@ impl PyCoupledMpc {
             Box::new(FourDofTarget::new(&set.target, mu.clamp(1e-3, 1.5), dt))
         } else {
             let path = PathBuf::from(&model);
+            // The surrogate predicts at the road's μ, as the 4-DOF model does.
             let m = py
-                .detach(move || pico_nn::SurrogateModel::from_path(path))
+                .detach(move || {
+                    pico_nn::SurrogateModel::from_path(path).and_then(|m| m.with_mu(mu))
+                })
                 .map_err(|e| crate::surrogate::ModelError::new_err(e.to_string()))?;
             Box::new(m)
         };

@@ -144,7 +144,7 @@ fn ctrl_step(c: &mut Criterion) {
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/full_size");
     for kind in ["pinn", "picopinn"] {
         let path = models.join(format!("{kind}.safetensors"));
-        match pico_nn::SurrogateModel::from_path(&path) {
+        match pico_nn::SurrogateModel::from_path(&path).and_then(|m| m.with_mu(MU)) {
             Ok(m) => bench_surrogate(c, kind, &params, &road, &records, Box::new(m)),
             Err(e) => eprintln!("ctrl_step/{kind}: skipped ({}: {e})", path.display()),
         }

@@ -122,7 +122,9 @@ fn main() {
         Box::new(FourDofTarget::new(&params.target, MU, dt)),
     )];
     for kind in ["pinn", "picopinn"] {
-        match pico_nn::SurrogateModel::from_path(models.join(format!("{kind}.safetensors"))) {
+        match pico_nn::SurrogateModel::from_path(models.join(format!("{kind}.safetensors")))
+            .and_then(|m| m.with_mu(MU))
+        {
             Ok(m) => surrogates.push((kind.into(), Box::new(m))),
             Err(e) => eprintln!("{kind}: skipped ({e})"),
         }
