@@ -34,7 +34,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK=1
 python -m pip install --quiet 'maturin>=1.9.4,<2'
 
 echo "setup: building picopit._core (release) and installing picopit into $VENV"
-# --extras test pulls in pytest, train torch/safetensors/scipy (the surrogate pipeline);
-# the build shares ./target with cargo.
-maturin develop --release --extras test,train --manifest-path py/Cargo.toml
+# --extras test pulls in pytest, train torch/safetensors/scipy (the surrogate pipeline),
+# peers casadi (benchmarks/peers); the build shares ./target with cargo.
+maturin develop --release --extras test,train,peers --manifest-path py/Cargo.toml
 python -c 'import picopit; print("setup: picopit ready:", ", ".join(picopit.__all__))'
