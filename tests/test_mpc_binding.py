@@ -108,6 +108,8 @@ def test_evaluate_scores_the_solvers_own_plan_with_its_merit():
     u_bad = plan["u"].copy()
     u_bad[:, 0] = 0.3
     assert m.evaluate(target, bullet, u_bad, plan["f"])[0] > merit
+    heading, weight = m.reference_target
+    assert heading == pytest.approx(np.pi) and weight == 1.0  # left side, engaged
     lin = m.linearisation()
     assert lin["gap"].shape == (20,) and lin["road_bullet"].shape == (20, 4)
     assert any(lin["band"])

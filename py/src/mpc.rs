@@ -266,6 +266,12 @@ impl PyCoupledMpc {
         Ok(())
     }
 
+    /// The target objective of the current reference: (target_heading, target_weight).
+    #[getter]
+    fn reference_target(&self) -> (f64, f64) {
+        (self.reference.target_heading, self.reference.target_weight)
+    }
+
     /// The current reference as an (N, 8) array (same columns as `set_reference`).
     fn reference<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         let rows: Vec<Vec<f64>> = self

@@ -312,6 +312,9 @@ class CoupledMpc:
     def set_reference(self, stages: _ArrayLike, target_heading: float, target_weight: float) -> None:
         """(N, 8): ``[rel_x, rel_y, rel_heading, rel_speed, track, fn_lo, fn_hi, envelope_lat]``."""
     def reference(self) -> _F64: ...
+    @property
+    def reference_target(self) -> Tuple[float, float]:
+        """``(target_heading, target_weight)`` of the current reference."""
     def solve(
         self,
         target: _ArrayLike,
