@@ -37,12 +37,12 @@ from .train import (LOSS_SCALES, Split, TrainError, evaluate, fit, physics_targe
 class CompressConfig:
     student: Tuple[int, ...] = (11, 32, 32, 8)
     budget: int = 812
-    distil_epochs: int = 40
+    distil_epochs: int = 60
     distil_lr: float = 3e-3
     norm_penalty: float = 1e-3
     prune: float = 0.02
     """Centres below this fraction of the tensor's max |w| are pruned (sign 0)."""
-    retrain_epochs: int = 80
+    retrain_epochs: int = 100
     retrain_lr: float = 2e-3
     lr_final: float = 1e-4
     batch: int = 1024

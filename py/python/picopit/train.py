@@ -1,12 +1,16 @@
 """``picopit train``: the teacher PINN (and the loss machinery PicoPINN retraining shares).
 
-Loss, all in the normalised output space (each increment divided by its training std):
+The network (format version 2) predicts the increments as the explicit-Euler kinematic base
+dt·[0, 0, 0, 0, p, r, vx, vy] plus a learned part whose statistics are the model's
+out_mean / out_std; μ is its 11th feature. Loss, in normalised units:
 
-- data, one step: ‖(o_net(z_k) − o_k) / σ_o‖² with o_k the recorded increments x_k → x_{k+1};
+- data, one step: ‖(o_net(z_k) − o_k) / s‖² with o_k the recorded increments x_k → x_{k+1}
+  and s, per output, the geometric mean of the std of the whole increment and of its
+  learned part (``loss_scale``; "increment" and "residual" are the alternatives);
 - data, rollout: the model rolls its own predictions over ``horizon`` steps from a recorded
   x_k with the recorded inputs and contacts (the body-frame contact force follows the
-  predicted heading); state errors divided by the matching increment std times the step
-  number;
+  predicted heading); state errors divided by the std of the matching whole increment
+  times the step number;
 - physics: the residual of the 4-DOF Newton–Euler equations with the contact force and its
   moment (``physics.FourDof``), integrated over the step: the network's increment minus the
   increment the equations give from the same x_k, u_k, contact and road μ, on the training
