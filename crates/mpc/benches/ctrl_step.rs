@@ -5,91 +5,16 @@
 //! the vehicle.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use dynamics::bullet::{BulletInput, BulletState};
 use dynamics::params::ParamSet;
-use dynamics::plant::{Plant, PlantConfig, VehicleInit};
 use dynamics::road::Road;
 use dynamics::target4dof::FourDofTarget;
-use dynamics::{TargetInput, TargetModel, TargetState};
-use mpc::reference::DefaultPit;
-use mpc::{CoupledMpc, MpcInput, MpcSettings, Reference, Side};
+use dynamics::TargetModel;
+use mpc::{CoupledMpc, MpcSettings};
 use std::path::Path;
 
-const MU: f64 = 0.9;
-
-struct Record {
-    target: TargetState,
-    bullet: BulletState,
-    last: BulletInput,
-    reference: Reference,
-}
-
-fn record(params: &ParamSet, road: &Road) -> Vec<Record> {
-    let settings = MpcSettings::default();
-    let target = Box::new(FourDofTarget::new(&params.target, MU, settings.dt));
-    let mut mpc = CoupledMpc::new(params, MU, target, settings.clone()).unwrap();
-    let mut plant = Plant::new(
-        params,
-        PlantConfig {
-            mu: MU,
-            ..PlantConfig::default()
-        },
-    )
-    .unwrap();
-    let lane = road.lane_center_offset(1);
-    plant.reset(
-        &VehicleInit {
-            x: 40.0,
-            y: lane + 3.0,
-            yaw: 0.0,
-            vx: 17.0,
-            vy: 0.0,
-            r: 0.0,
-        },
-        &VehicleInit {
-            x: 50.0,
-            y: lane,
-            yaw: 0.0,
-            vx: 15.0,
-            vy: 0.0,
-            r: 0.0,
-        },
-    );
-    let pit = DefaultPit::new(params, Side::Left);
-    let mut reference = Reference::new(settings.horizon);
-    let mut last = BulletInput::zeros();
-    let mut out = Vec::new();
-    for _ in 0..100 {
-        let (xt, xb) = (plant.target_state(), plant.bullet_state());
-        pit.fill(
-            &mut reference,
-            xt.as_slice(),
-            xb.as_slice(),
-            settings.dt,
-            0.0,
-        );
-        out.push(Record {
-            target: xt,
-            bullet: xb,
-            last,
-            reference: reference.clone(),
-        });
-        let input = MpcInput {
-            time: 0.0,
-            target: xt,
-            bullet: xb,
-            target_input: TargetInput::zeros(),
-            last_command: last,
-            road: Some(road),
-            obstacles: &[],
-            reference: &reference,
-        };
-        last = mpc.solve(&input).unwrap().command;
-        plant.set_bullet_command_blended(last[0], last[1]);
-        plant.advance(settings.dt);
-    }
-    out
-}
+#[path = "../examples/common/record.rs"]
+mod record;
+use record::{record, Record, MU};
 
 fn bench_surrogate(
     c: &mut Criterion,
@@ -112,16 +37,7 @@ fn bench_surrogate(
                 mpc.reset();
             }
             i += 1;
-            let input = MpcInput {
-                time: 0.0,
-                target: r.target,
-                bullet: r.bullet,
-                target_input: TargetInput::zeros(),
-                last_command: r.last,
-                road: Some(road),
-                obstacles: &[],
-                reference: &r.reference,
-            };
+            let input = r.input(road);
             std::hint::black_box(mpc.solve(&input).unwrap())
         });
     });
