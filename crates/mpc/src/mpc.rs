@@ -387,7 +387,7 @@ impl CoupledMpc {
         let mut s = self.settings.clone();
         s.qp = qp;
         s.validate()?;
-        let cs = clarabel_settings(&s.qp, s.time_budget);
+        let cs = clarabel_settings(&s.qp, s.qp.time_limit);
         self.qp_coupled
             .update_settings(cs.clone())
             .map_err(MpcError::Solver)?;
@@ -491,7 +491,7 @@ impl CoupledMpc {
         let p = Pattern::build(ncol, ncol, &pairs);
         view.constraints(&mut Emitter::pattern(&mut pairs, false), &mut b);
         let a = Pattern::build(m, ncol, &pairs);
-        let cs = clarabel_settings(&settings.qp, settings.time_budget);
+        let cs = clarabel_settings(&settings.qp, settings.qp.time_limit);
         Qp::new(p, a, layout.dyn_rows * n, cs).map_err(MpcError::Solver)
     }
 
@@ -1215,7 +1215,10 @@ impl AssemblyView<'_> {
             }
             let mut cols = [0usize; 8];
             for i in 0..4 {
-                cols[i] = c0 + l.o_xt.wrapping_add(TRACKED_T[i]);
+                // The bullet-only layout has no target columns (their entries are unused).
+                if l.coupled {
+                    cols[i] = c0 + l.o_xt + TRACKED_T[i];
+                }
                 cols[4 + i] = c0 + l.o_xb + TRACKED_B[i];
             }
             // The bullet-only QP holds the target fixed: only the bullet's entries.

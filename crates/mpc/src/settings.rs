@@ -133,6 +133,9 @@ pub struct QpSettings {
     /// Clarabel's Ruiz equilibration, computed once from the first real QP (the
     /// controller's warm-up) and reused by every in-place update.
     pub equilibrate: bool,
+    /// Clarabel's own wall-clock limit per QP (s): a safety net under the SCP loop's
+    /// `time_budget`, which is read from the injected clock.
+    pub time_limit: f64,
 }
 
 impl Default for QpSettings {
@@ -143,6 +146,7 @@ impl Default for QpSettings {
             tol_feas: 1e-4,
             iterative_refinement: false,
             equilibrate: false,
+            time_limit: 0.04,
         }
     }
 }
@@ -239,6 +243,7 @@ impl MpcSettings {
             ("contact.band", self.contact.band),
             ("qp.tol_gap", self.qp.tol_gap),
             ("qp.tol_feas", self.qp.tol_feas),
+            ("qp.time_limit", self.qp.time_limit),
             ("weights.penalty", self.weights.penalty),
             ("weights.proximal", self.weights.proximal),
         ];

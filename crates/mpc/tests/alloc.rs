@@ -63,11 +63,12 @@ fn the_control_step_allocates_only_clarabels_timer_block_per_qp() {
     }];
     let road = road();
     for mode in [ScpMode::Rti, ScpMode::Converged] {
-        let settings = MpcSettings {
+        let mut settings = MpcSettings {
             mode,
             time_budget: 10.0,
             ..MpcSettings::default()
         };
+        settings.qp.time_limit = 10.0;
         let mut m = mpc_with(settings, four_dof(&params()));
         for (i, s) in situations.iter().enumerate() {
             let mut inp = input(s, Some(&road));

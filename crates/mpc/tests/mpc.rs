@@ -6,8 +6,13 @@ use common::*;
 use dynamics::road::Obstacle;
 use mpc::{MpcSettings, MpcStatus, ScpMode, SolveError};
 
+/// Default settings with wall-clock limits out of the way: these tests check behaviour, and
+/// an unoptimised build (`cargo test`) runs a QP some 20x slower than a release build.
 fn settings() -> MpcSettings {
-    MpcSettings::default()
+    let mut s = MpcSettings::default();
+    s.time_budget = 10.0;
+    s.qp.time_limit = 10.0;
+    s
 }
 
 #[test]
@@ -249,7 +254,8 @@ fn the_time_budget_stops_converged_scp_on_an_injected_clock() {
     let mut st = settings();
     st.mode = ScpMode::Converged;
     st.max_scp_iter = 50;
-    // Every clock reading advances 1 ms; the budget allows a handful of readings.
+    // Every clock reading advances 1 ms; the budget allows a handful of readings (Clarabel's
+    // own wall-clock limit stays out of the way).
     st.time_budget = 0.012;
     let clock = Box::new(mpc::TickClock::new(1e-3));
     let mut m = mpc_with(st, four_dof(&params())).with_clock(clock);
