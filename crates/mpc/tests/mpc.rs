@@ -9,10 +9,15 @@ use mpc::{MpcSettings, MpcStatus, ScpMode, SolveError};
 /// Default settings with wall-clock limits out of the way: these tests check behaviour, and
 /// an unoptimised build (`cargo test`) runs a QP some 20x slower than a release build.
 fn settings() -> MpcSettings {
-    let mut s = MpcSettings::default();
-    s.time_budget = 10.0;
-    s.qp.time_limit = 10.0;
-    s
+    let d = MpcSettings::default();
+    MpcSettings {
+        time_budget: 10.0,
+        qp: mpc::settings::QpSettings {
+            time_limit: 10.0,
+            ..d.qp.clone()
+        },
+        ..d
+    }
 }
 
 #[test]
