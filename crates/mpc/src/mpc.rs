@@ -258,22 +258,17 @@ struct Vec2Copy {
 /// The coupled collision MPC: both vehicles' states, the bullet's inputs and the shared
 /// contact force over the horizon, solved by SCP over Clarabel QPs.
 ///
-/// Memory: three [`Plan`]s (each about `N·(2·8·8 + 2·6·8 + 60)` doubles), the QP data
-/// (`n = 19 N` columns, `m = 32 N` rows, `nnz(A) ≈ 170 N`, `nnz(P) ≈ 50 N`) and Clarabel's
-/// workspace, all allocated in [`CoupledMpc::new`]; [`CoupledMpc::solve`] allocates nothing.
+/// Memory: four [`Plan`]s (each about `N·(2·8·8 + 2·6·8 + 60)` doubles), two QPs (coupled:
+/// `19 N` columns, `33 N` rows; bullet-only: `9 N` columns, `18 N` rows) with their Clarabel
+/// workspaces, all allocated in [`CoupledMpc::new`]. [`CoupledMpc::solve`] allocates nothing
+/// itself; Clarabel 0.11 allocates one small block per QP inside its timers (`docs/mpc.md`).
 pub struct CoupledMpc {
     settings: MpcSettings,
     n: usize,
     bullet: BulletModel,
     target: Box<dyn TargetModel + Send + Sync>,
     shapes: Shapes,
-    steer_max: f64,
-    steer_rate: f64,
-    torque_min: f64,
-    torque_max: f64,
-    /// Variable scales: torque (N m) and force (N).
-    t_scale: f64,
-    f_scale: f64,
+    lim: Limits,
     lin: Plan,
     cand: Plan,
     prev: Plan,
@@ -313,10 +308,17 @@ struct AssemblyView<'a> {
     soft: &'a [SoftRows],
     reference: &'a Reference,
     last_command: BulletInput,
+    lim: Limits,
+}
+
+/// The bullet's input limits and the QP's variable scales.
+#[derive(Debug, Clone, Copy)]
+struct Limits {
     steer_max: f64,
     steer_rate: f64,
     torque_min: f64,
     torque_max: f64,
+    /// Variable scales: torque (N m) and force (N).
     t_scale: f64,
     f_scale: f64,
 }
@@ -354,12 +356,14 @@ impl CoupledMpc {
             bullet,
             target,
             shapes: Shapes::new(&params.bullet, &params.target),
-            steer_max: b.steer_max,
-            steer_rate: b.steer_rate_max,
-            torque_min: b.drive_torque_min,
-            torque_max: b.drive_torque_max,
-            t_scale,
-            f_scale,
+            lim: Limits {
+                steer_max: b.steer_max,
+                steer_rate: b.steer_rate_max,
+                torque_min: b.drive_torque_min,
+                torque_max: b.drive_torque_max,
+                t_scale,
+                f_scale,
+            },
             lin: Plan::new(n),
             cand: Plan::new(n),
             prev: Plan::new(n),
@@ -476,12 +480,15 @@ impl CoupledMpc {
             soft: &soft,
             reference: &reference,
             last_command: BulletInput::zeros(),
-            steer_max: 1.0,
-            steer_rate: 1.0,
-            torque_min: -1.0,
-            torque_max: 1.0,
-            t_scale: 1.0,
-            f_scale: 1.0,
+            // Only the pattern is read at construction; the values are placeholders.
+            lim: Limits {
+                steer_max: 1.0,
+                steer_rate: 1.0,
+                torque_min: -1.0,
+                torque_max: 1.0,
+                t_scale: 1.0,
+                f_scale: 1.0,
+            },
         };
         let (ncol, m) = (layout.columns(n), layout.row_count(n));
         let mut q = vec![0.0; ncol];
@@ -534,17 +541,18 @@ impl CoupledMpc {
         // The linearisation point: the previous plan shifted by one step, or the last
         // command held; projected onto the input bounds and rate limits.
         self.init_linearisation(input);
-        let ctx_force = (
-            self.settings.contact.force_max,
-            self.settings.contact.gap_release,
-            self.settings.contact.friction,
-        );
         let tl = self.clock.now();
-        self.rollout_lin(input, ctx_force);
+        self.roll(false, &input.target_input, true);
         self.linearise_soft(input);
         times.linearise += self.clock.now() - tl;
         self.coupled = self.soft.iter().any(|r| r.band);
-        let mut merit_lin = self.merit(&self.lin, input).0;
+        // Only converged mode tests steps against the merit; RTI takes its one step.
+        let converged = self.settings.mode == ScpMode::Converged;
+        let mut merit_lin = if converged {
+            self.merit(&self.lin, input).0
+        } else {
+            0.0
+        };
 
         let max_iter = match self.settings.mode {
             ScpMode::Rti => 1,
@@ -571,8 +579,12 @@ impl CoupledMpc {
             let ta = self.clock.now();
             self.assemble(input, trust);
             times.assemble += self.clock.now() - ta;
-            let obj_lin = self.objective_at_lin(input.reference);
-            self.snapshot_linearisation();
+            let obj_lin = if converged {
+                self.objective_at_lin(input.reference)
+            } else {
+                0.0
+            };
+            self.lin_snapshot.copy_trajectory_from(&self.lin);
             let tq = self.clock.now();
             let qs = if self.coupled {
                 self.qp_coupled.solve()
@@ -593,21 +605,22 @@ impl CoupledMpc {
             self.candidate_from_qp();
             // RTI never linearises at the candidate (the next step re-linearises from the
             // new measurement), so its rollout skips the Jacobians.
-            let jac = self.settings.mode == ScpMode::Converged;
-            self.rollout_cand(input, ctx_force, jac);
+            self.cand.xt[0] = self.lin.xt[0];
+            self.cand.xb[0] = self.lin.xb[0];
+            self.roll(true, &input.target_input, converged);
             self.model_error = self.qp_model_error();
             times.linearise += self.clock.now() - tl;
+            if !converged {
+                self.lin.copy_trajectory_from(&self.cand);
+                accepted_any = true;
+                status = MpcStatus::RtiStep;
+                break;
+            }
             let merit_cand = self.merit(&self.cand, input).0;
             // The QP models the merit's change: its objective at the linearisation point
             // (zero step, slacks at their smallest feasible value) minus at the solution.
             let predicted = obj_lin - self.qp().objective();
             let step = self.step_size();
-            if self.settings.mode == ScpMode::Rti {
-                self.lin.copy_from(&self.cand);
-                accepted_any = true;
-                status = MpcStatus::RtiStep;
-                break;
-            }
             let actual = merit_lin - merit_cand;
             if actual >= 0.1 * predicted.max(0.0) && merit_cand.is_finite() {
                 self.lin.copy_from(&self.cand);
@@ -634,7 +647,7 @@ impl CoupledMpc {
                 }
             }
         }
-        let out = if qp_failed || !accepted_any && self.settings.mode == ScpMode::Rti {
+        let out = if qp_failed || !accepted_any && !converged {
             self.fallback(input, qp_iterations, scp_iterations, times)
         } else {
             // Converged mode keeps the linearisation plan (the best accepted one, or the
@@ -643,7 +656,8 @@ impl CoupledMpc {
             if !self.lin.is_finite() {
                 self.fallback(input, qp_iterations, scp_iterations, times)
             } else {
-                self.prev.copy_from(&self.lin);
+                // Only the inputs and forces of `prev` are used (shifted, next step).
+                self.prev.copy_trajectory_from(&self.lin);
                 self.have_prev = true;
                 MpcOutput {
                     status,
@@ -679,9 +693,9 @@ impl CoupledMpc {
             (self.prev.u[0], Fallback::ShiftedPlan)
         } else {
             self.have_prev = false;
-            let steer = input.last_command[0].clamp(-self.steer_max, self.steer_max) * 0.5;
+            let steer = input.last_command[0].clamp(-self.lim.steer_max, self.lim.steer_max) * 0.5;
             (
-                BulletInput::new(steer, 0.5 * self.torque_min),
+                BulletInput::new(steer, 0.5 * self.lim.torque_min),
                 Fallback::Brake,
             )
         };
@@ -710,43 +724,33 @@ impl CoupledMpc {
             self.lin.f.fill(Vec2::zeros());
         }
         // Project onto the bounds and the steer-rate limit.
-        let dmax = self.steer_rate * self.settings.dt;
+        let dmax = self.lim.steer_rate * self.settings.dt;
         let mut prev = input.last_command[0];
         for u in &mut self.lin.u {
             u[0] = u[0]
-                .clamp(-self.steer_max, self.steer_max)
+                .clamp(-self.lim.steer_max, self.lim.steer_max)
                 .clamp(prev - dmax, prev + dmax);
-            u[1] = u[1].clamp(self.torque_min, self.torque_max);
+            u[1] = u[1].clamp(self.lim.torque_min, self.lim.torque_max);
             prev = u[0];
         }
         self.lin.xt[0] = input.target;
         self.lin.xb[0] = input.bullet;
     }
 
-    fn rollout_lin(&mut self, input: &MpcInput<'_>, (fm, rel, mu): (f64, f64, f64)) {
+    /// Roll `lin` (or, with `cand`, the candidate) forward through the nonlinear models from
+    /// its first state, with Jacobians if `jac`.
+    fn roll(&mut self, cand: bool, target_input: &TargetInput, jac: bool) {
+        let c = &self.settings.contact;
         let ctx = RolloutCtx {
             bullet: &self.bullet,
             shapes: &self.shapes,
-            target_input: &input.target_input,
-            force_max: fm,
-            release: rel,
-            friction: mu,
+            target_input,
+            force_max: c.force_max,
+            release: c.gap_release,
+            friction: c.friction,
         };
-        rollout(&ctx, self.target.as_mut(), &mut self.lin, true);
-    }
-
-    fn rollout_cand(&mut self, input: &MpcInput<'_>, (fm, rel, mu): (f64, f64, f64), jac: bool) {
-        let ctx = RolloutCtx {
-            bullet: &self.bullet,
-            shapes: &self.shapes,
-            target_input: &input.target_input,
-            force_max: fm,
-            release: rel,
-            friction: mu,
-        };
-        self.cand.xt[0] = self.lin.xt[0];
-        self.cand.xb[0] = self.lin.xb[0];
-        rollout(&ctx, self.target.as_mut(), &mut self.cand, jac);
+        let plan = if cand { &mut self.cand } else { &mut self.lin };
+        rollout(&ctx, self.target.as_mut(), plan, jac);
     }
 
     /// Inputs and forces of the QP solution around `lin`.
@@ -761,10 +765,13 @@ impl CoupledMpc {
             let c = k * l.stage;
             self.cand.u[k] = BulletInput::new(
                 self.lin.u[k][0] + x[c + l.o_u],
-                self.lin.u[k][1] + self.t_scale * x[c + l.o_u + 1],
+                self.lin.u[k][1] + self.lim.t_scale * x[c + l.o_u + 1],
             );
             self.cand.f[k] = if l.coupled {
-                Vec2::new(self.f_scale * x[c + l.o_f], self.f_scale * x[c + l.o_f + 1])
+                Vec2::new(
+                    self.lim.f_scale * x[c + l.o_f],
+                    self.lim.f_scale * x[c + l.o_f + 1],
+                )
             } else {
                 Vec2::zeros()
             };
@@ -879,15 +886,6 @@ impl CoupledMpc {
         }
     }
 
-    fn snapshot_linearisation(&mut self) {
-        let (a, b) = (&mut self.lin_snapshot, &self.lin);
-        a.u.copy_from_slice(&b.u);
-        a.f.copy_from_slice(&b.f);
-        a.xt.copy_from_slice(&b.xt);
-        a.xb.copy_from_slice(&b.xb);
-        a.pair.copy_from_slice(&b.pair);
-    }
-
     /// The trajectory the last QP was linearised at: inputs, forces and both vehicles'
     /// states (the `pair` gaps too; Jacobians are not kept).
     #[must_use]
@@ -940,15 +938,7 @@ impl CoupledMpc {
         self.cand.f.copy_from_slice(f);
         self.cand.xt[0] = input.target;
         self.cand.xb[0] = input.bullet;
-        let ctx = RolloutCtx {
-            bullet: &self.bullet,
-            shapes: &self.shapes,
-            target_input: &input.target_input,
-            force_max: self.settings.contact.force_max,
-            release: self.settings.contact.gap_release,
-            friction: self.settings.contact.friction,
-        };
-        rollout(&ctx, self.target.as_mut(), &mut self.cand, false);
+        self.roll(true, &input.target_input, false);
         Ok(self.merit(&self.cand, input))
     }
 
@@ -960,12 +950,7 @@ impl CoupledMpc {
             soft: &self.soft,
             reference: input.reference,
             last_command: input.last_command,
-            steer_max: self.steer_max,
-            steer_rate: self.steer_rate,
-            torque_min: self.torque_min,
-            torque_max: self.torque_max,
-            t_scale: self.t_scale,
-            f_scale: self.f_scale,
+            lim: self.lim,
         };
         let qp = if self.coupled {
             &mut self.qp_coupled
@@ -998,8 +983,8 @@ impl CoupledMpc {
             let f = self.lin.f[k];
             let f_over_k = if l.coupled { f.x / c.stiffness } else { 0.0 };
             if l.coupled {
-                qp.z[c0 + l.o_f] = f.x / self.f_scale;
-                qp.z[c0 + l.o_f + 1] = f.y / self.f_scale;
+                qp.z[c0 + l.o_f] = f.x / self.lim.f_scale;
+                qp.z[c0 + l.o_f + 1] = f.y / self.lim.f_scale;
             }
             let st = &reference.stages[k];
             let dev = row.rel.y - st.rel_pos.y;
@@ -1052,14 +1037,14 @@ impl CoupledMpc {
             }
             // Corridor.
             let f = plan.f[k];
-            let dist = (f.x - f.x.clamp(st.fn_lo, st.fn_hi)) / self.f_scale;
+            let dist = (f.x - f.x.clamp(st.fn_lo, st.fn_hi)) / self.lim.f_scale;
             cost += w.corridor * dist * dist;
             // Effort and rate.
             let u = plan.u[k];
-            let tn = u[1] / self.t_scale;
+            let tn = u[1] / self.lim.t_scale;
             cost += w.steer * u[0] * u[0] + w.torque * tn * tn;
             let du = u - u_prev;
-            let dtn = du[1] / self.t_scale;
+            let dtn = du[1] / self.lim.t_scale;
             cost += w.steer_rate * du[0] * du[0] + w.torque_rate * dtn * dtn;
             u_prev = u;
             // Soft constraints (nonlinear geometry).
@@ -1253,7 +1238,7 @@ impl AssemblyView<'_> {
             } else {
                 self.lin.u[k - 1]
             };
-            let scales = [1.0, self.t_scale];
+            let scales = [1.0, self.lim.t_scale];
             let wu = [w.steer, w.torque];
             let wr = [w.steer_rate, w.torque_rate];
             for i in 0..2 {
@@ -1276,7 +1261,7 @@ impl AssemblyView<'_> {
             if l.coupled {
                 // --- Force: corridor (Gauss–Newton on the squared distance), proximal.
                 let f = self.lin.f[k];
-                let fs = self.f_scale;
+                let fs = self.lim.f_scale;
                 let proj = f.x.clamp(st.fn_lo, st.fn_hi);
                 let outside = if (f.x - proj).abs() > 0.0 { 1.0 } else { 0.0 };
                 let wc = 2.0 * w.corridor * outside;
@@ -1301,8 +1286,8 @@ impl AssemblyView<'_> {
         let l = self.layout;
         let n = self.lin.len();
         let s = self.s;
-        let fs = self.f_scale;
-        let ts = self.t_scale;
+        let fs = self.lim.f_scale;
+        let ts = self.lim.t_scale;
         let n_eq = l.dyn_rows * n;
         for k in 0..n {
             let c0 = k * l.stage;
@@ -1367,28 +1352,28 @@ impl AssemblyView<'_> {
                 e,
                 b,
                 &[(cu, 1.0)],
-                (self.steer_max - u[0]).min(ts_steer).max(0.0),
+                (self.lim.steer_max - u[0]).min(ts_steer).max(0.0),
             );
             row(
                 e,
                 b,
                 &[(cu, -1.0)],
-                (self.steer_max + u[0]).min(ts_steer).max(0.0),
+                (self.lim.steer_max + u[0]).min(ts_steer).max(0.0),
             );
             row(
                 e,
                 b,
                 &[(ct, 1.0)],
-                ((self.torque_max - u[1]) / ts).min(ts_torque).max(0.0),
+                ((self.lim.torque_max - u[1]) / ts).min(ts_torque).max(0.0),
             );
             row(
                 e,
                 b,
                 &[(ct, -1.0)],
-                ((u[1] - self.torque_min) / ts).min(ts_torque).max(0.0),
+                ((u[1] - self.lim.torque_min) / ts).min(ts_torque).max(0.0),
             );
             // Steer rate.
-            let dmax = self.steer_rate * s.dt;
+            let dmax = self.lim.steer_rate * s.dt;
             let u_prev = if k == 0 {
                 self.last_command[0]
             } else {

@@ -64,8 +64,9 @@ impl Plan {
         self.u.is_empty()
     }
 
-    /// Copy another plan of the same horizon (no allocation).
-    pub fn copy_from(&mut self, other: &Self) {
+    /// Copy another plan's inputs, forces, states and contact geometry, not its Jacobians
+    /// (no allocation).
+    pub fn copy_trajectory_from(&mut self, other: &Self) {
         self.u.copy_from_slice(&other.u);
         self.f.copy_from_slice(&other.f);
         self.xt.copy_from_slice(&other.xt);
@@ -73,6 +74,11 @@ impl Plan {
         self.pair.copy_from_slice(&other.pair);
         self.ct.copy_from_slice(&other.ct);
         self.cb.copy_from_slice(&other.cb);
+    }
+
+    /// Copy another plan of the same horizon, Jacobians included (no allocation).
+    pub fn copy_from(&mut self, other: &Self) {
+        self.copy_trajectory_from(other);
         self.jt.clone_from_slice(&other.jt);
         self.jb.clone_from_slice(&other.jb);
     }
