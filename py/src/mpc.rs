@@ -51,6 +51,73 @@ fn table(obj: &Bound<'_, PyAny>, name: &str, cols: usize) -> PyResult<Vec<Vec<f6
     Ok(rows)
 }
 
+/// The per-step arguments of `solve` and `evaluate`, checked and copied.
+struct StepArgs {
+    target: nalgebra::SVector<f64, 8>,
+    bullet: nalgebra::SVector<f64, 6>,
+    target_input: TargetInput,
+    last_command: BulletInput,
+    time: f64,
+}
+
+impl StepArgs {
+    fn parse(
+        target: &Bound<'_, PyAny>,
+        bullet: &Bound<'_, PyAny>,
+        target_input: Option<&Bound<'_, PyAny>>,
+        last_command: Option<&Bound<'_, PyAny>>,
+        time: f64,
+    ) -> PyResult<Self> {
+        Ok(Self {
+            target: vec_arg::<8>(target, "target")?,
+            bullet: vec_arg::<6>(bullet, "bullet")?,
+            target_input: target_input
+                .map(|a| vec_arg::<2>(a, "target_input"))
+                .transpose()?
+                .unwrap_or_else(TargetInput::zeros),
+            last_command: last_command
+                .map(|a| vec_arg::<2>(a, "last_command"))
+                .transpose()?
+                .unwrap_or_else(BulletInput::zeros),
+            time: finite(time, "time")?,
+        })
+    }
+}
+
+impl PyCoupledMpc {
+    /// Run `f` on the core with these arguments, the stored road, obstacles and reference,
+    /// the GIL released.
+    fn detached<R: Send>(
+        &mut self,
+        py: Python<'_>,
+        a: &StepArgs,
+        f: impl FnOnce(&mut CoreMpc, &MpcInput<'_>) -> R + Send,
+    ) -> R {
+        let Self {
+            core,
+            reference,
+            road,
+            obstacles,
+            ..
+        } = self;
+        py.detach(|| {
+            f(
+                core,
+                &MpcInput {
+                    time: a.time,
+                    target: a.target,
+                    bullet: a.bullet,
+                    target_input: a.target_input,
+                    last_command: a.last_command,
+                    road: road.as_ref(),
+                    obstacles,
+                    reference,
+                },
+            )
+        })
+    }
+}
+
 /// The coupled collision MPC.
 #[pyclass(module = "picopit._core", name = "CoupledMpc")]
 pub struct PyCoupledMpc {
@@ -308,37 +375,9 @@ impl PyCoupledMpc {
         last_command: Option<&Bound<'py, PyAny>>,
         time: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let xt = vec_arg::<8>(target, "target")?;
-        let xb = vec_arg::<6>(bullet, "bullet")?;
-        let ut = target_input
-            .map(|a| vec_arg::<2>(a, "target_input"))
-            .transpose()?
-            .unwrap_or_else(TargetInput::zeros);
-        let last = last_command
-            .map(|a| vec_arg::<2>(a, "last_command"))
-            .transpose()?
-            .unwrap_or_else(BulletInput::zeros);
-        let time = finite(time, "time")?;
-        let Self {
-            core,
-            reference,
-            road,
-            obstacles,
-            ..
-        } = self;
-        let out = py
-            .detach(|| {
-                core.solve(&MpcInput {
-                    time,
-                    target: xt,
-                    bullet: xb,
-                    target_input: ut,
-                    last_command: last,
-                    road: road.as_ref(),
-                    obstacles,
-                    reference,
-                })
-            })
+        let args = StepArgs::parse(target, bullet, target_input, last_command, time)?;
+        let out = self
+            .detached(py, &args, |core, input| core.solve(input))
             .map_err(mpc_err)?;
         let d = PyDict::new(py);
         d.set_item("status", format!("{:?}", out.status))?;
@@ -350,7 +389,7 @@ impl PyCoupledMpc {
                 mpc::Fallback::Brake => "brake",
             }),
         )?;
-        d.set_item("coupled", core.last_qp_coupled())?;
+        d.set_item("coupled", self.core.last_qp_coupled())?;
         d.set_item("scp_iterations", out.scp_iterations)?;
         d.set_item("qp_iterations", out.qp_iterations)?;
         d.set_item("merit", out.merit)?;
@@ -458,17 +497,7 @@ impl PyCoupledMpc {
         last_command: Option<&Bound<'_, PyAny>>,
         time: f64,
     ) -> PyResult<(f64, f64)> {
-        let xt = vec_arg::<8>(target, "target")?;
-        let xb = vec_arg::<6>(bullet, "bullet")?;
-        let ut = target_input
-            .map(|a| vec_arg::<2>(a, "target_input"))
-            .transpose()?
-            .unwrap_or_else(TargetInput::zeros);
-        let last = last_command
-            .map(|a| vec_arg::<2>(a, "last_command"))
-            .transpose()?
-            .unwrap_or_else(BulletInput::zeros);
-        let time = finite(time, "time")?;
+        let args = StepArgs::parse(target, bullet, target_input, last_command, time)?;
         let n = self.core.settings().horizon;
         let u_rows = table(u, "u", 2)?;
         let f_rows = table(f, "f", 2)?;
@@ -484,30 +513,8 @@ impl PyCoupledMpc {
             .map(|r| BulletInput::new(r[0], r[1]))
             .collect();
         let f: Vec<Vec2> = f_rows.iter().map(|r| Vec2::new(r[0], r[1])).collect();
-        let Self {
-            core,
-            reference,
-            road,
-            obstacles,
-            ..
-        } = self;
-        py.detach(|| {
-            core.evaluate(
-                &MpcInput {
-                    time,
-                    target: xt,
-                    bullet: xb,
-                    target_input: ut,
-                    last_command: last,
-                    road: road.as_ref(),
-                    obstacles,
-                    reference,
-                },
-                &u,
-                &f,
-            )
-        })
-        .map_err(mpc_err)
+        self.detached(py, &args, |core, input| core.evaluate(input, &u, &f))
+            .map_err(mpc_err)
     }
 
     /// The largest |x_QP − x_rollout| of the last QP's step (the linearisation error).
