@@ -99,6 +99,41 @@ pub(crate) fn step_args<const N: usize>(
     ))
 }
 
+/// `step` of any target model, GIL released: the shared body of the `FourDofTarget` and
+/// `SurrogateModel` bindings.
+pub(crate) fn target_step<'py>(
+    py: Python<'py>,
+    model: &mut (dyn TargetModel + Send),
+    x: &Bound<'py, PyAny>,
+    u: &Bound<'py, PyAny>,
+    fc: Option<&Bound<'py, PyAny>>,
+    gamma: f64,
+    point: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
+    let next = py.detach(move || model.step(&x, &u, &c));
+    Ok(vec_out(py, &next))
+}
+
+/// `step_jac` of any target model, GIL released: `(x_next, A, B, F)`.
+pub(crate) fn target_step_jac<'py>(
+    py: Python<'py>,
+    model: &mut (dyn TargetModel + Send),
+    x: &Bound<'py, PyAny>,
+    u: &Bound<'py, PyAny>,
+    fc: Option<&Bound<'py, PyAny>>,
+    gamma: f64,
+    point: Option<&Bound<'py, PyAny>>,
+) -> PyResult<StepJac<'py>> {
+    let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
+    let (next, jac) = py.detach(move || {
+        let mut jac = TargetJacobians::default();
+        let next = model.step_jac(&x, &u, &c, &mut jac);
+        (next, jac)
+    });
+    Ok(jac_out(py, &next, &jac.a, &jac.b, &jac.f))
+}
+
 /// `(x_next, A, B, F)` as fresh numpy arrays.
 pub(crate) fn jac_out<'py, const N: usize>(
     py: Python<'py>,
@@ -266,10 +301,7 @@ impl FourDofTarget {
         gamma: f64,
         point: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
-        let inner = &mut self.inner;
-        let next = py.detach(move || inner.step(&x, &u, &c));
-        Ok(vec_out(py, &next))
+        target_step(py, &mut self.inner, x, u, fc, gamma, point)
     }
 
     /// One step with the exact Jacobians of the discrete map:
@@ -284,14 +316,7 @@ impl FourDofTarget {
         gamma: f64,
         point: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<StepJac<'py>> {
-        let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
-        let inner = &mut self.inner;
-        let (next, jac) = py.detach(move || {
-            let mut jac = TargetJacobians::default();
-            let next = inner.step_jac(&x, &u, &c, &mut jac);
-            (next, jac)
-        });
-        Ok(jac_out(py, &next, &jac.a, &jac.b, &jac.f))
+        target_step_jac(py, &mut self.inner, x, u, fc, gamma, point)
     }
 }
 

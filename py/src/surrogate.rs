@@ -2,9 +2,9 @@
 //! PicoPINN files, `docs/model-format.md`), with the same `step`/`step_jac` conventions as
 //! `FourDofTarget`.
 
-use crate::models::{jac_out, step_args, StepJac};
-use crate::{vec_arg, vec_out};
-use dynamics::{TargetJacobians, TargetModel};
+use crate::models::{target_step, target_step_jac, StepJac};
+use crate::vec_arg;
+use dynamics::TargetModel;
 use numpy::PyArray1;
 use pico_nn::SurrogateModel as CoreSurrogate;
 use pyo3::exceptions::PyValueError;
@@ -103,10 +103,7 @@ impl SurrogateModel {
         gamma: f64,
         point: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
-        let inner = &mut self.inner;
-        let next = py.detach(move || inner.step(&x, &u, &c));
-        Ok(vec_out(py, &next))
+        target_step(py, &mut self.inner, x, u, fc, gamma, point)
     }
 
     /// One step with the exact Jacobians of the discrete map:
@@ -121,14 +118,7 @@ impl SurrogateModel {
         gamma: f64,
         point: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<StepJac<'py>> {
-        let (x, u, c) = step_args::<8>(x, u, fc, gamma, point)?;
-        let inner = &mut self.inner;
-        let (next, jac) = py.detach(move || {
-            let mut jac = TargetJacobians::default();
-            let next = inner.step_jac(&x, &u, &c, &mut jac);
-            (next, jac)
-        });
-        Ok(jac_out(py, &next, &jac.a, &jac.b, &jac.f))
+        target_step_jac(py, &mut self.inner, x, u, fc, gamma, point)
     }
 
     /// The increments `o` (8,) (kinematic base included) for the features
