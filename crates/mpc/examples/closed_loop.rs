@@ -54,17 +54,7 @@ fn main() {
             r: 0.0,
         },
     );
-    let reference = Reference::fixed_pit(
-        settings.horizon,
-        &params,
-        Side::Left,
-        12f64.to_radians(),
-        0.05,
-        1.5,
-        (3000.0, 15000.0),
-        0.0,
-    );
-    let mut reference = reference;
+    let mut reference = Reference::new(settings.horizon);
     if let Ok(v) = std::env::var("REF") {
         // "long,lat,heading_deg": a plain relative pose to hold (no force wanted).
         let f: Vec<f64> = v.split(',').map(|x| x.parse().unwrap()).collect();

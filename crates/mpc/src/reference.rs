@@ -2,7 +2,7 @@
 //! bullet envelope C_B and the target's terminal heading, per step of the horizon.
 //!
 //! The upper layer (crates/planner) fills a [`Reference`] from its decision package through
-//! h_ref; without it, [`Reference::fixed_pit`] gives the fixed default of the paper's
+//! h_ref; without it, [`DefaultPit`] gives the fixed default of the paper's
 //! "without upper layer" ablation.
 
 use dynamics::geometry::{rotate, Vec2};
@@ -84,32 +84,6 @@ impl Reference {
             target_heading: 0.0,
             target_weight: 0.0,
         }
-    }
-
-    /// The fixed PIT reference (no upper layer): the bullet's inner front corner on the
-    /// target's rear quarter, just behind its rear axle, angled `contact_angle` into the
-    /// target, `overlap` metres of planned crush, closing at `rel_speed`; the corridor asks
-    /// for `[fn_lo, fn_hi]` and the target objective is on throughout. A push on the left
-    /// rear quarter yaws the target counter-clockwise, so the reversed heading is
-    /// `lane_heading + side·π`.
-    #[must_use]
-    #[allow(clippy::too_many_arguments)]
-    pub fn fixed_pit(
-        n: usize,
-        params: &ParamSet,
-        side: Side,
-        contact_angle: f64,
-        overlap: f64,
-        rel_speed: f64,
-        fn_corridor: (f64, f64),
-        lane_heading: f64,
-    ) -> Self {
-        let mut r = Self::new(n);
-        let stage = pit_stage(params, side, contact_angle, overlap, rel_speed, fn_corridor);
-        r.stages.fill(stage);
-        r.target_heading = lane_heading + side.sign() * std::f64::consts::PI;
-        r.target_weight = 1.0;
-        r
     }
 }
 
