@@ -34,10 +34,16 @@ fn stats(v: &mut [f64]) -> String {
 }
 
 fn main() {
-    let repeats: usize = std::env::args()
-        .nth(1)
-        .and_then(|a| a.parse().ok())
-        .unwrap_or(5);
+    let repeats: usize = match std::env::args().nth(1) {
+        None => 5,
+        Some(a) => match a.parse::<usize>() {
+            Ok(n) if n > 0 => n,
+            _ => {
+                eprintln!("ctrl_step_stats: repeats = {a:?}: expected a positive integer");
+                std::process::exit(2);
+            }
+        },
+    };
     let params = ParamSet::builtin("full_size").unwrap();
     let road = Road::straight(2000.0, 3, 3.5, 1.0);
     let records = record(&params, &road);
