@@ -260,8 +260,8 @@ struct Vec2Copy {
 ///
 /// Memory: four [`Plan`]s (each about `N·(2·8·8 + 2·6·8 + 60)` doubles), two QPs (coupled:
 /// `19 N` columns, `33 N` rows; bullet-only: `9 N` columns, `18 N` rows) with their Clarabel
-/// workspaces, all allocated in [`CoupledMpc::new`]. [`CoupledMpc::solve`] allocates nothing
-/// itself; Clarabel 0.11 allocates one small block per QP inside its timers (`docs/mpc.md`).
+/// workspaces, all allocated in [`CoupledMpc::new`] (which also runs one warm-up solve of
+/// each QP). [`CoupledMpc::solve`] allocates nothing, Clarabel included (`docs/mpc.md`).
 pub struct CoupledMpc {
     settings: MpcSettings,
     n: usize,
@@ -391,13 +391,11 @@ impl CoupledMpc {
         let mut s = self.settings.clone();
         s.qp = qp;
         s.validate()?;
-        let cs = clarabel_settings(&s.qp, s.qp.time_limit);
-        self.qp_coupled
-            .update_settings(cs.clone())
-            .map_err(MpcError::Solver)?;
-        self.qp_bullet
-            .update_settings(cs)
-            .map_err(MpcError::Solver)?;
+        let cs = clarabel_settings(&s.qp);
+        for qp in [&mut self.qp_coupled, &mut self.qp_bullet] {
+            qp.update_settings(cs.clone()).map_err(MpcError::Solver)?;
+            qp.set_time_limit(s.qp.time_limit);
+        }
         self.settings = s;
         Ok(())
     }
@@ -498,8 +496,8 @@ impl CoupledMpc {
         let p = Pattern::build(ncol, ncol, &pairs);
         view.constraints(&mut Emitter::pattern(&mut pairs, false), &mut b);
         let a = Pattern::build(m, ncol, &pairs);
-        let cs = clarabel_settings(&settings.qp, settings.qp.time_limit);
-        Qp::new(p, a, layout.dyn_rows * n, cs).map_err(MpcError::Solver)
+        let cs = clarabel_settings(&settings.qp);
+        Qp::new(p, a, layout.dyn_rows * n, cs, settings.qp.time_limit).map_err(MpcError::Solver)
     }
 
     /// Solve both QPs once (vehicles apart: bullet-only; overlapping: coupled) so that

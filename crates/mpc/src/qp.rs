@@ -8,7 +8,14 @@
 //! and without dropping zeros, so `update_P` / `update_A` reuse its symbolic factorisation.
 
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+use clarabel::solver::{
+    DefaultInfo, DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
+/// The root timer under which every solve of ours runs (see [`Qp::solve`]).
+const OUTER_TIMER: &str = "picopit";
 
 /// Writes matrix entries, either recording the pattern or filling values.
 pub(crate) struct Emitter<'a> {
@@ -123,7 +130,7 @@ impl QpStatus {
             SolverStatus::Solved => Self::Solved,
             SolverStatus::AlmostSolved => Self::AlmostSolved,
             SolverStatus::MaxIterations => Self::MaxIterations,
-            SolverStatus::MaxTime => Self::MaxTime,
+            SolverStatus::MaxTime | SolverStatus::CallbackTerminated => Self::MaxTime,
             _ => Self::Failed,
         }
     }
@@ -155,6 +162,36 @@ pub(crate) struct Qp {
     p_rowval: Vec<usize>,
     /// A point at which [`Qp::objective_at_z`] evaluates the objective.
     pub z: Vec<f64>,
+    /// The per-solve time limit, enforced by a termination callback (see [`Qp::solve`]).
+    deadline: Arc<Deadline>,
+}
+
+/// What the termination callback compares Clarabel's clock against: the solve stops once
+/// `info.solve_time − start > limit` (both in seconds, stored as `f64` bits).
+#[derive(Debug, Default)]
+struct Deadline {
+    start: AtomicU64,
+    limit: AtomicU64,
+}
+
+impl Deadline {
+    fn new(limit: f64) -> Arc<Self> {
+        let d = Arc::new(Self::default());
+        d.limit.store(limit.to_bits(), Ordering::Relaxed);
+        d
+    }
+
+    fn expired(&self, info: &DefaultInfo<f64>) -> bool {
+        let start = f64::from_bits(self.start.load(Ordering::Relaxed));
+        let limit = f64::from_bits(self.limit.load(Ordering::Relaxed));
+        info.solve_time - start > limit
+    }
+}
+
+/// Install the time-limit callback on a freshly built solver.
+fn arm(solver: &mut DefaultSolver<f64>, deadline: &Arc<Deadline>) {
+    let d = Arc::clone(deadline);
+    solver.set_termination_callback(move |info: &DefaultInfo<f64>| d.expired(info));
 }
 
 /// What rebuilding the solver from real data needs: P and A patterns, settings, cones.
@@ -165,14 +202,12 @@ type Rebuild = (
     Vec<SupportedConeT<f64>>,
 );
 
-/// Clarabel settings for the MPC's QPs.
-pub(crate) fn clarabel_settings(
-    s: &crate::settings::QpSettings,
-    time_limit: f64,
-) -> DefaultSettings<f64> {
+/// Clarabel settings for the MPC's QPs. Clarabel's own `time_limit` stays infinite: the
+/// limit `s.time_limit` is enforced per solve by [`Qp`]'s termination callback.
+pub(crate) fn clarabel_settings(s: &crate::settings::QpSettings) -> DefaultSettings<f64> {
     DefaultSettings {
         max_iter: s.max_iter,
-        time_limit,
+        time_limit: f64::INFINITY,
         verbose: false,
         tol_gap_abs: s.tol_gap,
         tol_gap_rel: s.tol_gap,
@@ -197,6 +232,7 @@ impl Qp {
         a: Pattern,
         n_eq: usize,
         settings: DefaultSettings<f64>,
+        time_limit: f64,
     ) -> Result<Self, String> {
         let n = p.matrix.n;
         let m = a.matrix.m;
@@ -218,11 +254,13 @@ impl Qp {
                 cones.to_vec(),
             )
         });
-        let solver = DefaultSolver::new(&p.matrix, &q, &a.matrix, &b, &cones, settings)
+        let mut solver = DefaultSolver::new(&p.matrix, &q, &a.matrix, &b, &cones, settings)
             .map_err(|e| e.to_string())?;
         if !solver.is_data_update_allowed() {
             return Err("Clarabel refuses in-place data updates".to_owned());
         }
+        let deadline = Deadline::new(time_limit);
+        arm(&mut solver, &deadline);
         Ok(Self {
             n,
             m,
@@ -237,7 +275,13 @@ impl Qp {
             p_colptr,
             p_rowval,
             z: vec![0.0; n],
+            deadline,
         })
+    }
+
+    /// Set the per-solve time limit (s).
+    pub(crate) fn set_time_limit(&mut self, limit: f64) {
+        self.deadline.limit.store(limit.to_bits(), Ordering::Relaxed);
     }
 
     /// Push the current values into the solver and solve (within the time limit given at
@@ -247,7 +291,10 @@ impl Qp {
             p.nzval.copy_from_slice(&self.p_val);
             a.nzval.copy_from_slice(&self.a_val);
             match DefaultSolver::new(&p, &self.q, &a, &self.b, &cones, settings) {
-                Ok(s) => self.solver = s,
+                Ok(s) => {
+                    self.solver = s;
+                    arm(&mut self.solver, &self.deadline);
+                }
                 Err(_) => return QpStatus::Failed,
             }
         }
@@ -258,7 +305,22 @@ impl Qp {
         if !ok {
             return QpStatus::Failed;
         }
+        // Clarabel's `Info::reset` resets its root "solve" timer, which clears the nested
+        // timer maps and makes the next solve allocate them again (one `HashMap` per solve,
+        // clarabel 0.11.1 `src/timers/timers.rs`). Running every solve under our own root
+        // timer nests Clarabel's "solve" one level down, where the reset does not reach, so
+        // the maps are built at the first solve and reused. The outer timer then accumulates
+        // over all solves, and so does `info.solve_time`: the time limit is measured from the
+        // value it has when this solve starts.
+        if let Some(t) = self.solver.timers.as_mut() {
+            t.start_as_current(OUTER_TIMER);
+            let start = t.total_time().as_secs_f64();
+            self.deadline.start.store(start.to_bits(), Ordering::Relaxed);
+        }
         self.solver.solve();
+        if let Some(t) = self.solver.timers.as_mut() {
+            t.stop_current();
+        }
         let sol = &self.solver.solution;
         let status = QpStatus::from_clarabel(sol.status);
         if status.usable() && sol.x.iter().any(|v| !v.is_finite()) {

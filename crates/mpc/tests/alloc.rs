@@ -1,12 +1,9 @@
-//! The control step allocates nothing after construction but for one block per QP that
-//! Clarabel 0.11 allocates inside its timing instrumentation: RTI and converged SCP, apart
-//! and in contact, with a road and obstacles (a counting global allocator).
+//! The control step allocates nothing after construction: RTI and converged SCP, apart and
+//! in contact, with a road and obstacles (a counting global allocator).
 //!
-//! Clarabel's `Info::reset` calls `InnerTimer::reset`, which clears the nested timer maps
-//! (`src/timers/timers.rs`), so the first sub-timer of every solve re-creates a `HashMap`
-//! (404 bytes here). Everything of ours (linearisation, assembly, rollouts, merit) allocates
-//! nothing; the test pins the count to exactly one per QP, so that a Clarabel release that
-//! fixes this makes it fail and gets the bound tightened to zero.
+//! This includes Clarabel: its `Info::reset` would clear the nested timer maps at every solve
+//! (clarabel 0.11.1, `src/timers/timers.rs`) and re-create one `HashMap`; `Qp::solve` runs
+//! each solve under its own root timer so that the maps survive (see `crates/mpc/src/qp.rs`).
 
 mod common;
 
@@ -45,7 +42,7 @@ fn allocations() -> usize {
 }
 
 #[test]
-fn the_control_step_allocates_only_clarabels_timer_block_per_qp() {
+fn the_control_step_allocates_nothing() {
     let (rx, ry) = touching_rel(0.03);
     let situations = [
         situation(-10.0, 3.0, 0.0, 15.0, 17.0),
@@ -76,11 +73,8 @@ fn the_control_step_allocates_only_clarabels_timer_block_per_qp() {
             let before = allocations();
             let out = m.solve(&inp).unwrap();
             let n = allocations() - before;
-            let qps = out.scp_iterations as usize;
-            assert_eq!(
-                n, qps,
-                "{mode:?}, situation {i}: {n} allocations in {qps} QPs ({out:?})"
-            );
+            assert!(out.scp_iterations >= 1, "{out:?}");
+            assert_eq!(n, 0, "{mode:?}, situation {i}: {n} allocations ({out:?})");
         }
     }
 }

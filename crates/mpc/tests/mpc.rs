@@ -313,3 +313,31 @@ fn the_same_code_path_runs_the_4dof_model_the_pinn_and_picopinn() {
     }
     assert_eq!(names, ["4dof", "pinn", "picopinn"]);
 }
+
+#[test]
+fn the_qp_time_limit_holds_per_solve_not_over_the_controllers_lifetime() {
+    // A limit far below one interior-point iteration stops every QP at its first check:
+    // no usable step, a finite safe command.
+    let s = situation(-8.0, 3.0, 0.0, 15.0, 17.0);
+    let mut st = settings();
+    st.mode = ScpMode::Rti;
+    st.qp.time_limit = 1e-9;
+    let mut m = mpc_with(st.clone(), four_dof(&params()));
+    let out = m.solve(&input(&s, None)).unwrap();
+    assert!(
+        matches!(out.status, MpcStatus::QpFailure | MpcStatus::TimeBudget),
+        "{out:?}"
+    );
+    assert_eq!(out.qp_iterations, 0, "{out:?}");
+    assert!(out.fallback.is_some(), "{out:?}");
+    assert!(out.command.iter().all(|v| v.is_finite()), "{out:?}");
+    // The same solver with a generous limit solves again: the time already spent in earlier
+    // solves does not count against the next one.
+    st.qp.time_limit = 10.0;
+    m.set_qp_settings(st.qp.clone()).unwrap();
+    for _ in 0..3 {
+        let out = m.solve(&input(&s, None)).unwrap();
+        assert_eq!(out.status, MpcStatus::RtiStep, "{out:?}");
+        assert!(out.fallback.is_none(), "{out:?}");
+    }
+}
