@@ -1,0 +1,1 @@
+//! Scenarios, the closed-loop episode runner, the success test and the failure causes.
