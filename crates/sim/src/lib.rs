@@ -1,1 +1,15 @@
 //! Scenarios, the closed-loop episode runner, the success test and the failure causes.
+//!
+//! * [`scenario`]: the scenario schema (JSON lines), its loader with typed errors naming
+//!   line and field, and the helpers that build the road, obstacles, the plant's initial
+//!   conditions and the target driver from a scenario.
+//! * [`outcome`]: the success test and the single first failure cause of an episode.
+//! * [`screen`]: rule and short-simulation screening used by the dataset generator.
+
+pub mod outcome;
+pub mod scenario;
+pub mod screen;
+
+pub use outcome::{FailureCause, JudgeSettings, Metrics, Monitor, Observation, Outcome, Status};
+pub use scenario::{load_jsonl, parse_jsonl, Scenario, ScenarioError, TargetDriver};
+pub use screen::{screen, ScreenReport, ScreenSettings, Verdict};

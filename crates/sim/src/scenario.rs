@@ -1,0 +1,920 @@
+//! The scenario schema of the PIT Scenario Dataset: one JSON object per line.
+//!
+//! A scenario fixes the road, the adhesion, the obstacles, both vehicles' initial states,
+//! the target driver's behaviour, `T_max`, `ε_ψ` and the parameter set (see
+//! `docs/scenarios.md` for the field table with units). Vehicles are placed in **Frenet
+//! coordinates** of the road's reference line (station `s`, offset `d` positive to the
+//! left, heading relative to the road at `s`) with body-frame velocities; obstacles are
+//! world-frame [`Obstacle`]s (rectangles at constant velocity). SI units throughout.
+//!
+//! [`load_jsonl`] refuses a malformed file with a [`ScenarioError`] that names the line
+//! and the field (`line 7: obstacles[2].body.width: …`); nothing here panics on user data.
+
+use dynamics::params::{ParamSet, VehicleParams};
+use dynamics::plant::VehicleInit;
+use dynamics::road::{Obstacle, Road, RoadSpec, SegmentSpec};
+use dynamics::{wrap_angle, TargetState};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use thiserror::Error;
+
+/// Adhesion band boundaries: `low` below 0.4 (snow, ice, gravel), `mid` from 0.4 to below
+/// 0.7 (wet asphalt), `high` from 0.7 (dry asphalt).
+pub const MU_LOW_MID: f64 = 0.4;
+pub const MU_MID_HIGH: f64 = 0.7;
+/// Admissible adhesion (the plant accepts (0, 1.5]).
+pub const MU_RANGE: (f64, f64) = (0.05, 1.2);
+/// Most obstacles in one scenario.
+pub const MAX_OBSTACLES: usize = 32;
+
+/// A scenario file or line that cannot be used. `line` is 1-based.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum ScenarioError {
+    /// The line is not JSON at all.
+    #[error("line {line}: not valid JSON at column {column}: {message}")]
+    Syntax {
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    /// A field is missing, unknown, of the wrong type or out of range.
+    #[error("line {line}: {field}: {message}")]
+    Field {
+        line: usize,
+        field: String,
+        message: String,
+    },
+    /// Two scenarios share an id.
+    #[error("line {line}: id: `{id}` repeats the scenario of line {first}")]
+    DuplicateId {
+        line: usize,
+        id: String,
+        first: usize,
+    },
+    /// The file could not be read.
+    #[error("cannot read {path}: {message}")]
+    Io { path: String, message: String },
+    /// The file holds no scenario.
+    #[error("{path}: no scenarios")]
+    Empty { path: String },
+    /// The parameter set a scenario names could not be loaded.
+    #[error("params: {0}")]
+    Params(String),
+}
+
+impl ScenarioError {
+    fn field(line: usize, field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::Field {
+            line,
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+
+    /// The same error reported on another line.
+    #[must_use]
+    pub fn at_line(self, line: usize) -> Self {
+        match self {
+            Self::Syntax { column, message, .. } => Self::Syntax {
+                line,
+                column,
+                message,
+            },
+            Self::Field { field, message, .. } => Self::Field {
+                line,
+                field,
+                message,
+            },
+            other => other,
+        }
+    }
+}
+
+/// Road type of a scenario.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[serde(rename_all = "snake_case")]
+pub enum Category {
+    StraightUrban,
+    StraightHighway,
+    Curved,
+}
+
+impl Category {
+    pub const ALL: [Category; 3] = [Self::StraightUrban, Self::StraightHighway, Self::Curved];
+
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::StraightUrban => "straight_urban",
+            Self::StraightHighway => "straight_highway",
+            Self::Curved => "curved",
+        }
+    }
+
+    #[must_use]
+    pub fn is_straight(self) -> bool {
+        !matches!(self, Self::Curved)
+    }
+}
+
+/// Adhesion band of μ.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[serde(rename_all = "snake_case")]
+pub enum Adhesion {
+    Low,
+    Mid,
+    High,
+}
+
+impl Adhesion {
+    /// The band `mu` falls in.
+    #[must_use]
+    pub fn of(mu: f64) -> Self {
+        if mu < MU_LOW_MID {
+            Self::Low
+        } else if mu < MU_MID_HIGH {
+            Self::Mid
+        } else {
+            Self::High
+        }
+    }
+
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Low => "low",
+            Self::Mid => "mid",
+            Self::High => "high",
+        }
+    }
+}
+
+/// The built-in parameter set a scenario runs with.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[serde(rename_all = "snake_case")]
+pub enum ParamSetName {
+    FullSize,
+    HalfScale,
+}
+
+impl ParamSetName {
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::FullSize => "full_size",
+            Self::HalfScale => "half_scale",
+        }
+    }
+
+    /// The parameter set.
+    ///
+    /// # Errors
+    /// [`ScenarioError::Params`] if the built-in set does not load (never for a valid build).
+    pub fn load(self) -> Result<ParamSet, ScenarioError> {
+        ParamSet::builtin(self.name()).map_err(|e| ScenarioError::Params(e.to_string()))
+    }
+}
+
+/// The road: a cross-section and a reference line, either straight (`radius` absent) or a
+/// curve: straight `entry`, clothoid `transition` from 0 to `1/radius`, arc, the mirror
+/// clothoid, straight `entry` again; `length` is the total (m).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RoadDef {
+    /// Number of lanes (1–8), numbered from the right.
+    pub lanes: u32,
+    /// Lane width (m).
+    pub lane_width: f64,
+    /// Paved shoulder beyond the outer lanes, each side (m).
+    pub shoulder: f64,
+    /// Total length of the reference line (m).
+    pub length: f64,
+    /// Signed radius of the arc (m, positive turns left); absent for a straight road.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
+    /// Straight before and after the curve (m); curved roads only.
+    #[serde(default)]
+    pub entry: f64,
+    /// Clothoid length into and out of the arc (m); curved roads only.
+    #[serde(default)]
+    pub transition: f64,
+}
+
+impl RoadDef {
+    /// Half width of the carriageway including shoulders (m).
+    #[must_use]
+    pub fn half_width(&self) -> f64 {
+        0.5 * f64::from(self.lanes) * self.lane_width + self.shoulder
+    }
+
+    /// The arc's length (m) of a curved road.
+    #[must_use]
+    pub fn arc_length(&self) -> f64 {
+        self.length - 2.0 * self.entry - 2.0 * self.transition
+    }
+
+    /// The reference line as a [`RoadSpec`] (not validated).
+    #[must_use]
+    pub fn spec(&self) -> RoadSpec {
+        let mut segments = Vec::with_capacity(5);
+        match self.radius {
+            None => segments.push(SegmentSpec::Straight {
+                length: self.length,
+            }),
+            Some(radius) => {
+                let k = 1.0 / radius;
+                if self.entry > 0.0 {
+                    segments.push(SegmentSpec::Straight { length: self.entry });
+                }
+                if self.transition > 0.0 {
+                    segments.push(SegmentSpec::Clothoid {
+                        length: self.transition,
+                        curvature_start: 0.0,
+                        curvature_end: k,
+                    });
+                }
+                segments.push(SegmentSpec::Arc {
+                    length: self.arc_length(),
+                    curvature: k,
+                });
+                if self.transition > 0.0 {
+                    segments.push(SegmentSpec::Clothoid {
+                        length: self.transition,
+                        curvature_start: k,
+                        curvature_end: 0.0,
+                    });
+                }
+                if self.entry > 0.0 {
+                    segments.push(SegmentSpec::Straight { length: self.entry });
+                }
+            }
+        }
+        RoadSpec {
+            segments,
+            lanes: self.lanes,
+            lane_width: self.lane_width,
+            shoulder: self.shoulder,
+            origin: [0.0, 0.0, 0.0],
+        }
+    }
+
+    /// Build the road.
+    ///
+    /// # Errors
+    /// [`ScenarioError::Field`] (on line 0: use [`ScenarioError::at_line`]) naming the bad
+    /// road field.
+    pub fn build(&self) -> Result<Road, ScenarioError> {
+        self.check(0)?;
+        Road::new(self.spec()).map_err(|e| ScenarioError::field(0, "road", e.to_string()))
+    }
+
+    fn check(&self, line: usize) -> Result<(), ScenarioError> {
+        let f = |name: &str| format!("road.{name}");
+        if !(1..=8).contains(&self.lanes) {
+            return Err(ScenarioError::field(
+                line,
+                f("lanes"),
+                format!("{}: must lie in 1..=8", self.lanes),
+            ));
+        }
+        range(line, &f("lane_width"), self.lane_width, 0.5, 6.0)?;
+        range(line, &f("shoulder"), self.shoulder, 0.0, 10.0)?;
+        range(line, &f("length"), self.length, 10.0, 20_000.0)?;
+        range(line, &f("entry"), self.entry, 0.0, 20_000.0)?;
+        range(line, &f("transition"), self.transition, 0.0, 20_000.0)?;
+        match self.radius {
+            None => {
+                if self.entry != 0.0 || self.transition != 0.0 {
+                    return Err(ScenarioError::field(
+                        line,
+                        f("entry"),
+                        "entry and transition belong to a curve: give a radius or set them to 0",
+                    ));
+                }
+            }
+            Some(r) => {
+                finite(line, &f("radius"), r)?;
+                let hw = self.half_width();
+                if r.abs() < (2.0 * hw).max(10.0) {
+                    return Err(ScenarioError::field(
+                        line,
+                        f("radius"),
+                        format!("{r}: |radius| must be at least max(10 m, the road's width {:.2} m)", 2.0 * hw),
+                    ));
+                }
+                let arc = self.arc_length();
+                if arc <= 0.0 {
+                    return Err(ScenarioError::field(
+                        line,
+                        f("length"),
+                        format!("{}: must exceed 2·entry + 2·transition (the arc would be {arc} m)", self.length),
+                    ));
+                }
+                let turn = (arc + self.transition) / r.abs();
+                if turn > std::f64::consts::PI + 1e-9 {
+                    return Err(ScenarioError::field(
+                        line,
+                        f("radius"),
+                        format!("{r}: the curve turns {turn:.3} rad; at most π"),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A vehicle's initial state in the road's Frenet frame (of its c.g.).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FrenetState {
+    /// Station along the reference line (m).
+    pub s: f64,
+    /// Lateral offset, positive to the left (m).
+    pub d: f64,
+    /// Heading relative to the road at `s` (rad).
+    pub heading: f64,
+    /// Body-frame longitudinal and lateral velocity (m/s) and yaw rate (rad/s).
+    pub vx: f64,
+    pub vy: f64,
+    pub r: f64,
+}
+
+impl FrenetState {
+    fn check(&self, line: usize, name: &str) -> Result<(), ScenarioError> {
+        let f = |field: &str| format!("{name}.{field}");
+        range(line, &f("s"), self.s, -10_000.0, 20_000.0)?;
+        finite(line, &f("d"), self.d)?;
+        range(line, &f("heading"), self.heading, -1.2, 1.2)?;
+        range(line, &f("vx"), self.vx, 0.0, 60.0)?;
+        range(line, &f("vy"), self.vy, -10.0, 10.0)?;
+        range(line, &f("r"), self.r, -3.0, 3.0)
+    }
+
+    /// The world-frame initial condition on `road`.
+    #[must_use]
+    pub fn to_world(&self, road: &Road) -> VehicleInit {
+        let pose = road.pose_at(self.s);
+        let p = road.to_world(self.s, self.d);
+        VehicleInit {
+            x: p.x,
+            y: p.y,
+            yaw: pose.heading + self.heading,
+            vx: self.vx,
+            vy: self.vy,
+            r: self.r,
+        }
+    }
+}
+
+/// When a reaction starts.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Trigger {
+    /// `delay` seconds after the start of the episode.
+    Start,
+    /// `delay` seconds after the first bullet–target contact.
+    Contact,
+}
+
+/// The target driver. Before its reaction every driver but `none` keeps its lane (steer
+/// toward the line `d = offset`, see [`TargetDriver`]); the reaction is:
+/// * `none`: an incapacitated or fleeing driver off the controls, holding a fixed small steer;
+/// * `lane_keep`: keeps steering for its lane throughout, also after being hit;
+/// * `brake`: from its onset brakes with `fraction` of the maximum brake torque (still
+///   steering for the lane before the first contact, hands off after it);
+/// * `counter_steer`: from `delay` after the first contact steers against the yaw rate,
+///   `δ = −gain · r`, clamped to `max_steer`.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum DriverDef {
+    None {
+        /// Fixed road-wheel steer (rad).
+        steer: f64,
+    },
+    LaneKeep {
+        /// Lateral offset of the followed line (m).
+        offset: f64,
+        /// Gain multiplier of the lane-keeping law (1 = nominal).
+        gain: f64,
+    },
+    Brake {
+        offset: f64,
+        gain: f64,
+        trigger: Trigger,
+        /// Reaction delay after the trigger (s).
+        delay: f64,
+        /// Share of the maximum brake torque (0–1].
+        fraction: f64,
+    },
+    CounterSteer {
+        offset: f64,
+        gain: f64,
+        /// Reaction delay after the first contact (s).
+        delay: f64,
+        /// Yaw-rate feedback gain (rad of steer per rad/s).
+        steer_gain: f64,
+        /// Largest counter-steer (rad).
+        max_steer: f64,
+    },
+}
+
+impl DriverDef {
+    #[must_use]
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::None { .. } => "none",
+            Self::LaneKeep { .. } => "lane_keep",
+            Self::Brake { .. } => "brake",
+            Self::CounterSteer { .. } => "counter_steer",
+        }
+    }
+
+    fn check(&self, line: usize, half_width: f64) -> Result<(), ScenarioError> {
+        let offset_gain = |offset: f64, gain: f64| -> Result<(), ScenarioError> {
+            range(line, "driver.offset", offset, -half_width, half_width)?;
+            range(line, "driver.gain", gain, 0.1, 5.0)
+        };
+        match *self {
+            Self::None { steer } => range(line, "driver.steer", steer, -0.3, 0.3),
+            Self::LaneKeep { offset, gain } => offset_gain(offset, gain),
+            Self::Brake {
+                offset,
+                gain,
+                delay,
+                fraction,
+                ..
+            } => {
+                offset_gain(offset, gain)?;
+                range(line, "driver.delay", delay, 0.0, 120.0)?;
+                if !(fraction.is_finite() && fraction > 0.0 && fraction <= 1.0) {
+                    return Err(ScenarioError::field(
+                        line,
+                        "driver.fraction",
+                        format!("{fraction}: must lie in (0, 1]"),
+                    ));
+                }
+                Ok(())
+            }
+            Self::CounterSteer {
+                offset,
+                gain,
+                delay,
+                steer_gain,
+                max_steer,
+            } => {
+                offset_gain(offset, gain)?;
+                range(line, "driver.delay", delay, 0.0, 120.0)?;
+                range(line, "driver.steer_gain", steer_gain, 0.0, 5.0)?;
+                range(line, "driver.max_steer", max_steer, 0.0, 1.0)
+            }
+        }
+    }
+}
+
+/// What an obstacle stands for (informational; the physics only sees the rectangle).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[serde(rename_all = "snake_case")]
+pub enum ObstacleRole {
+    /// A vehicle in a lane ahead (moving on straights, stopped on curves).
+    ForwardTraffic,
+    /// An object on the shoulder: parked car, barrier segment, post.
+    Roadside,
+}
+
+/// An obstacle of a scenario.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioObstacle {
+    pub role: ObstacleRole,
+    /// The rectangle at `t = 0` and its constant world velocity.
+    pub body: Obstacle,
+}
+
+/// One scenario (one line of the dataset).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Unique id.
+    pub id: String,
+    pub category: Category,
+    /// Parameter set of both vehicles.
+    pub params: ParamSetName,
+    /// Id of the prior (row of `data/priors.csv`) it was sampled from.
+    pub prior: String,
+    /// Seed of the sampler for this scenario.
+    pub seed: u64,
+    pub road: RoadDef,
+    /// Road adhesion (peak friction).
+    pub mu: f64,
+    /// Band of `mu`; must agree with it.
+    pub adhesion: Adhesion,
+    pub obstacles: Vec<ScenarioObstacle>,
+    pub target: FrenetState,
+    pub bullet: FrenetState,
+    pub driver: DriverDef,
+    /// Time limit of an episode (s).
+    pub t_max: f64,
+    /// Heading tolerance of the reversed-heading goal (rad).
+    pub eps_psi: f64,
+}
+
+impl Scenario {
+    /// Parse and validate one JSON line; errors are reported on line `line`.
+    ///
+    /// # Errors
+    /// [`ScenarioError::Syntax`] if the text is not JSON, [`ScenarioError::Field`] naming the
+    /// field otherwise.
+    pub fn from_json_line(text: &str, line: usize) -> Result<Self, ScenarioError> {
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| ScenarioError::Syntax {
+                line,
+                column: e.column(),
+                message: strip_position(&e.to_string()),
+            })?;
+        let scenario: Self = serde_path_to_error::deserialize(value).map_err(|e| {
+            let path = e.path().to_string();
+            let message = e.inner().to_string();
+            ScenarioError::Field {
+                line,
+                field: field_of(&path, &message),
+                message,
+            }
+        })?;
+        scenario.validate(line)?;
+        Ok(scenario)
+    }
+
+    /// One JSON line (no trailing newline); round-trips through [`Scenario::from_json_line`].
+    ///
+    /// # Panics
+    /// Never: every field has a JSON representation (validated numbers are finite).
+    #[must_use]
+    pub fn to_json_line(&self) -> String {
+        serde_json::to_string(self).expect("a scenario always serialises")
+    }
+
+    /// Check every value: finite numbers, ranges, consistency of category and road, of μ
+    /// and its band, vehicles on the road.
+    ///
+    /// # Errors
+    /// [`ScenarioError::Field`] naming the first bad field.
+    pub fn validate(&self, line: usize) -> Result<(), ScenarioError> {
+        if self.id.is_empty() || self.id.len() > 64 {
+            return Err(ScenarioError::field(line, "id", "must have 1 to 64 characters"));
+        }
+        if self.prior.len() > 64 {
+            return Err(ScenarioError::field(line, "prior", "must have at most 64 characters"));
+        }
+        self.road.check(line)?;
+        match (self.category.is_straight(), self.road.radius) {
+            (true, Some(_)) => {
+                return Err(ScenarioError::field(
+                    line,
+                    "road.radius",
+                    format!("a {} road has no radius", self.category.name()),
+                ))
+            }
+            (false, None) => {
+                return Err(ScenarioError::field(
+                    line,
+                    "road.radius",
+                    "a curved road needs a radius",
+                ))
+            }
+            _ => {}
+        }
+        range(line, "mu", self.mu, MU_RANGE.0, MU_RANGE.1)?;
+        let band = Adhesion::of(self.mu);
+        if band != self.adhesion {
+            return Err(ScenarioError::field(
+                line,
+                "adhesion",
+                format!(
+                    "`{}` disagrees with mu = {} (band `{}`: low < {MU_LOW_MID} <= mid < {MU_MID_HIGH} <= high)",
+                    self.adhesion.name(),
+                    self.mu,
+                    band.name()
+                ),
+            ));
+        }
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return Err(ScenarioError::field(
+                line,
+                "obstacles",
+                format!("{} obstacles: at most {MAX_OBSTACLES}", self.obstacles.len()),
+            ));
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            o.body.validate().map_err(|e| match e {
+                dynamics::RoadError::Invalid {
+                    field,
+                    value,
+                    reason,
+                } => ScenarioError::field(
+                    line,
+                    format!("obstacles[{i}].body.{field}"),
+                    format!("{value}: {reason}"),
+                ),
+                other => ScenarioError::field(line, format!("obstacles[{i}].body"), other.to_string()),
+            })?;
+            for (name, v) in [("length", o.body.length), ("width", o.body.width)] {
+                if v > 50.0 {
+                    return Err(ScenarioError::field(
+                        line,
+                        format!("obstacles[{i}].body.{name}"),
+                        format!("{v}: at most 50 m"),
+                    ));
+                }
+            }
+            if o.body.vx.hypot(o.body.vy) > 60.0 {
+                return Err(ScenarioError::field(
+                    line,
+                    format!("obstacles[{i}].body.vx"),
+                    "speed above 60 m/s",
+                ));
+            }
+        }
+        let hw = self.road.half_width();
+        for (name, v) in [("target", &self.target), ("bullet", &self.bullet)] {
+            v.check(line, name)?;
+            if v.d.abs() >= hw {
+                return Err(ScenarioError::field(
+                    line,
+                    format!("{name}.d"),
+                    format!("{}: off the road (|d| must be below the half width {hw})", v.d),
+                ));
+            }
+        }
+        self.driver.check(line, hw)?;
+        range(line, "t_max", self.t_max, 1.0, 120.0)?;
+        if !(self.eps_psi.is_finite() && self.eps_psi > 0.0 && self.eps_psi <= std::f64::consts::FRAC_PI_2) {
+            return Err(ScenarioError::field(
+                line,
+                "eps_psi",
+                format!("{}: must lie in (0, π/2]", self.eps_psi),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The road.
+    ///
+    /// # Errors
+    /// As [`RoadDef::build`].
+    pub fn build_road(&self) -> Result<Road, ScenarioError> {
+        self.road.build()
+    }
+
+    /// The obstacles as the plant takes them.
+    #[must_use]
+    pub fn obstacles(&self) -> Vec<Obstacle> {
+        self.obstacles.iter().map(|o| o.body.clone()).collect()
+    }
+
+    /// Initial conditions `(bullet, target)` of the plant on `road` (this scenario's road).
+    #[must_use]
+    pub fn initial_states(&self, road: &Road) -> (VehicleInit, VehicleInit) {
+        (self.bullet.to_world(road), self.target.to_world(road))
+    }
+
+    /// The target's initial state `[vx, vy, ψ, r, p, φ, X, Y]` (roll at rest).
+    #[must_use]
+    pub fn target_state(&self, road: &Road) -> TargetState {
+        let t = self.target.to_world(road);
+        TargetState::from([t.vx, t.vy, t.yaw, t.r, 0.0, 0.0, t.x, t.y])
+    }
+
+    /// The bullet's initial state `[X, Y, ψ, vx, vy, r]`.
+    #[must_use]
+    pub fn bullet_state(&self, road: &Road) -> [f64; 6] {
+        let b = self.bullet.to_world(road);
+        [b.x, b.y, b.yaw, b.vx, b.vy, b.r]
+    }
+
+    /// The target driver of this scenario for parameter set `params`.
+    #[must_use]
+    pub fn target_driver(&self, params: &ParamSet) -> TargetDriver {
+        TargetDriver::new(self.driver, &params.target, self.target.s)
+    }
+}
+
+/// Read and validate a JSON-lines file of scenarios. Blank lines are skipped; ids must be
+/// unique.
+///
+/// # Errors
+/// [`ScenarioError::Io`] if the file cannot be read, [`ScenarioError::Empty`] if it holds
+/// no scenario, otherwise the first bad line's error (line number and field).
+pub fn load_jsonl(path: impl AsRef<Path>) -> Result<Vec<Scenario>, ScenarioError> {
+    let path = path.as_ref();
+    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    let out = parse_jsonl(&text)?;
+    if out.is_empty() {
+        return Err(ScenarioError::Empty {
+            path: path.display().to_string(),
+        });
+    }
+    Ok(out)
+}
+
+/// Parse JSON-lines text (as [`load_jsonl`], without the empty-file check).
+///
+/// # Errors
+/// The first bad line's error.
+pub fn parse_jsonl(text: &str) -> Result<Vec<Scenario>, ScenarioError> {
+    let mut out = Vec::new();
+    let mut seen = std::collections::HashMap::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = i + 1;
+        if raw.trim().is_empty() {
+            continue;
+        }
+        let sc = Scenario::from_json_line(raw, line)?;
+        if let Some(&first) = seen.get(&sc.id) {
+            return Err(ScenarioError::DuplicateId {
+                line,
+                id: sc.id,
+                first,
+            });
+        }
+        seen.insert(sc.id.clone(), line);
+        out.push(sc);
+    }
+    Ok(out)
+}
+
+/// The target driver's command `(δ, T_b)` as a function of time, the first contact and the
+/// target's state. Allocation-free; keeps the last Frenet station as the projection hint.
+///
+/// Lane keeping: `δ = L κ(s) + g (−k_d (d − offset) − k_ψ wrap(ψ − ψ_road) − k_r (r − v κ))`
+/// with `L` the wheelbase, `k_d = 0.05 rad/m`, `k_ψ = 0.6`, `k_r = 0.1 s`, scaled by the
+/// driver's gain `g`, clamped to `±0.15 rad` (a driver's corrections, not a spin recovery).
+#[derive(Debug, Clone, Copy)]
+pub struct TargetDriver {
+    def: DriverDef,
+    wheelbase: f64,
+    brake_max: f64,
+    s_hint: f64,
+}
+
+/// Lane-keeping gains (see [`TargetDriver`]).
+pub const LANE_KEEP_KD: f64 = 0.05;
+pub const LANE_KEEP_KPSI: f64 = 0.6;
+pub const LANE_KEEP_KR: f64 = 0.1;
+pub const LANE_KEEP_MAX_STEER: f64 = 0.15;
+
+impl TargetDriver {
+    #[must_use]
+    pub fn new(def: DriverDef, target: &VehicleParams, s0: f64) -> Self {
+        Self {
+            def,
+            wheelbase: target.wheelbase(),
+            brake_max: target.brake_torque_max,
+            s_hint: s0,
+        }
+    }
+
+    #[must_use]
+    pub fn def(&self) -> &DriverDef {
+        &self.def
+    }
+
+    /// The lane-keeping steer toward the line `d = offset`.
+    fn lane_keep(&mut self, offset: f64, gain: f64, x: &TargetState, road: &Road) -> f64 {
+        let f = road.project_with_hint(dynamics::geometry::Vec2::new(x[6], x[7]), self.s_hint);
+        self.s_hint = f.s;
+        let e_d = f.d - offset;
+        let e_psi = wrap_angle(x[2] - f.heading);
+        let r_ref = x[0] * f.curvature;
+        let fb = -LANE_KEEP_KD * e_d - LANE_KEEP_KPSI * e_psi - LANE_KEEP_KR * (x[3] - r_ref);
+        (self.wheelbase * f.curvature + gain * fb).clamp(-LANE_KEEP_MAX_STEER, LANE_KEEP_MAX_STEER)
+    }
+
+    /// `(δ, T_b)` at time `t` (s) given the time of the first bullet–target contact (if
+    /// any) and the target state `[vx, vy, ψ, r, p, φ, X, Y]`.
+    pub fn command(
+        &mut self,
+        t: f64,
+        first_contact: Option<f64>,
+        x: &TargetState,
+        road: &Road,
+    ) -> (f64, f64) {
+        let since_contact = first_contact.map(|tc| t - tc);
+        match self.def {
+            DriverDef::None { steer } => (steer, 0.0),
+            DriverDef::LaneKeep { offset, gain } => (self.lane_keep(offset, gain, x, road), 0.0),
+            DriverDef::Brake {
+                offset,
+                gain,
+                trigger,
+                delay,
+                fraction,
+            } => {
+                let on = match trigger {
+                    Trigger::Start => t >= delay,
+                    Trigger::Contact => since_contact.is_some_and(|dt| dt >= delay),
+                };
+                let brake = if on { fraction * self.brake_max } else { 0.0 };
+                let steer = if since_contact.is_some() {
+                    0.0
+                } else {
+                    self.lane_keep(offset, gain, x, road)
+                };
+                (steer, brake)
+            }
+            DriverDef::CounterSteer {
+                offset,
+                gain,
+                delay,
+                steer_gain,
+                max_steer,
+            } => match since_contact {
+                Some(dt) if dt >= delay => ((-steer_gain * x[3]).clamp(-max_steer, max_steer), 0.0),
+                Some(_) => (0.0, 0.0),
+                None => (self.lane_keep(offset, gain, x, road), 0.0),
+            },
+        }
+    }
+}
+
+fn finite(line: usize, field: &str, v: f64) -> Result<(), ScenarioError> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(ScenarioError::field(line, field, format!("{v}: must be finite")))
+    }
+}
+
+fn range(line: usize, field: &str, v: f64, lo: f64, hi: f64) -> Result<(), ScenarioError> {
+    finite(line, field, v)?;
+    if v < lo || v > hi {
+        return Err(ScenarioError::field(
+            line,
+            field,
+            format!("{v}: must lie in [{lo}, {hi}]"),
+        ));
+    }
+    Ok(())
+}
+
+/// serde_json appends " at line L column C"; the line is always 1 within one record.
+fn strip_position(msg: &str) -> String {
+    match msg.rfind(" at line ") {
+        Some(i) => msg[..i].to_owned(),
+        None => msg.to_owned(),
+    }
+}
+
+/// The field a deserialisation error is about: the path, extended by the name in a
+/// "missing field `x`" / "unknown field `x`" message (whose path is the parent object).
+fn field_of(path: &str, message: &str) -> String {
+    let parent = if path == "." { "" } else { path };
+    for prefix in ["missing field `", "unknown field `"] {
+        if let Some(rest) = message.strip_prefix(prefix) {
+            if let Some(end) = rest.find('`') {
+                let name = &rest[..end];
+                // serde_path_to_error already puts an unknown field on the path.
+                if parent == name || parent.ends_with(&format!(".{name}")) {
+                    return parent.to_owned();
+                }
+                return if parent.is_empty() {
+                    name.to_owned()
+                } else {
+                    format!("{parent}.{name}")
+                };
+            }
+        }
+    }
+    if parent.is_empty() {
+        "(record)".to_owned()
+    } else {
+        parent.to_owned()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn field_of_extends_missing_and_unknown() {
+        assert_eq!(field_of(".", "missing field `mu`"), "mu");
+        assert_eq!(field_of("road", "missing field `lanes`"), "road.lanes");
+        assert_eq!(
+            field_of("target.z", "unknown field `z`, expected one of `s`"),
+            "target.z"
+        );
+        assert_eq!(field_of("road.lanes", "invalid type: string"), "road.lanes");
+    }
+
+    #[test]
+    fn adhesion_bands() {
+        assert_eq!(Adhesion::of(0.2), Adhesion::Low);
+        assert_eq!(Adhesion::of(0.4), Adhesion::Mid);
+        assert_eq!(Adhesion::of(0.69), Adhesion::Mid);
+        assert_eq!(Adhesion::of(0.7), Adhesion::High);
+    }
+}

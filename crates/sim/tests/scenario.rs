@@ -1,0 +1,169 @@
+//! The scenario schema: round trip, typed errors naming line and field, helpers.
+
+mod common;
+
+use serde_json::json;
+use sim::scenario::{parse_jsonl, Scenario, ScenarioError};
+
+fn field_error(text: &str, line: usize) -> (usize, String, String) {
+    match Scenario::from_json_line(text, line) {
+        Err(ScenarioError::Field {
+            line,
+            field,
+            message,
+        }) => (line, field, message),
+        other => panic!("expected a field error, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_scenario_round_trips() {
+    for v in [common::curved(), common::straight()] {
+        let sc = Scenario::from_json_line(&v.to_string(), 1).unwrap();
+        let line = sc.to_json_line();
+        let back = Scenario::from_json_line(&line, 1).unwrap();
+        assert_eq!(sc, back);
+        assert_eq!(line, back.to_json_line());
+    }
+}
+
+#[test]
+fn a_file_with_a_bad_line_names_the_line_and_the_field() {
+    let good = common::curved();
+    let mut second = common::straight();
+    second["mu"] = json!(3.0);
+    let text = format!("{good}\n\n{second}\n");
+    let err = parse_jsonl(&text).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, ScenarioError::Field { line: 3, ref field, .. } if field == "mu"), "{msg}");
+    assert!(msg.starts_with("line 3: mu:"), "{msg}");
+}
+
+#[test]
+fn missing_unknown_and_mistyped_fields_are_named() {
+    let mut v = common::curved();
+    v.as_object_mut().unwrap().remove("eps_psi");
+    let (line, field, msg) = field_error(&v.to_string(), 5);
+    assert_eq!((line, field.as_str()), (5, "eps_psi"), "{msg}");
+
+    let mut v = common::curved();
+    v["road"].as_object_mut().unwrap().remove("lanes");
+    assert_eq!(field_error(&v.to_string(), 1).1, "road.lanes");
+
+    let mut v = common::curved();
+    v["target"]["spin"] = json!(1.0);
+    assert_eq!(field_error(&v.to_string(), 1).1, "target.spin");
+
+    let mut v = common::curved();
+    v["obstacles"][0]["body"]["width"] = json!("wide");
+    let (_, field, msg) = field_error(&v.to_string(), 1);
+    assert_eq!(field, "obstacles[0].body.width", "{msg}");
+
+    let mut v = common::curved();
+    v["obstacles"][0]["body"]["width"] = json!(-1.0);
+    assert_eq!(field_error(&v.to_string(), 1).1, "obstacles[0].body.width");
+
+    let mut v = common::curved();
+    v["driver"]["kind"] = json!("swerve");
+    assert_eq!(field_error(&v.to_string(), 1).1, "driver.kind");
+
+    let mut v = common::curved();
+    v["category"] = json!("roundabout");
+    assert_eq!(field_error(&v.to_string(), 1).1, "category");
+}
+
+#[test]
+fn ranges_and_consistency_are_checked() {
+    let cases: Vec<(&str, Box<dyn Fn(&mut serde_json::Value)>)> = vec![
+        ("mu", Box::new(|v| v["mu"] = json!(0.0))),
+        ("adhesion", Box::new(|v| v["adhesion"] = json!("low"))),
+        ("road.radius", Box::new(|v| v["category"] = json!("straight_highway"))),
+        ("target.d", Box::new(|v| v["target"]["d"] = json!(9.0))),
+        ("bullet.vx", Box::new(|v| v["bullet"]["vx"] = json!(-2.0))),
+        ("t_max", Box::new(|v| v["t_max"] = json!(0.0))),
+        ("eps_psi", Box::new(|v| v["eps_psi"] = json!(2.0))),
+        ("road.radius", Box::new(|v| v["road"]["radius"] = json!(3.0))),
+        ("road.length", Box::new(|v| v["road"]["length"] = json!(150.0))),
+        ("driver.gain", Box::new(|v| v["driver"]["gain"] = json!(0.0))),
+        ("id", Box::new(|v| v["id"] = json!(""))),
+    ];
+    for (field, edit) in cases {
+        let mut v = common::curved();
+        edit(&mut v);
+        let (_, got, msg) = field_error(&v.to_string(), 2);
+        assert_eq!(got, field, "{msg}");
+    }
+}
+
+#[test]
+fn not_json_is_a_syntax_error_with_the_line() {
+    let err = Scenario::from_json_line("{\"id\": ", 9).unwrap_err();
+    assert!(matches!(err, ScenarioError::Syntax { line: 9, .. }), "{err}");
+    let text = format!("{}\n{{oops\n", common::curved());
+    assert!(matches!(parse_jsonl(&text), Err(ScenarioError::Syntax { line: 2, .. })));
+}
+
+#[test]
+fn duplicate_ids_are_refused() {
+    let v = common::curved();
+    let text = format!("{v}\n{v}\n");
+    assert!(matches!(
+        parse_jsonl(&text),
+        Err(ScenarioError::DuplicateId { line: 2, first: 1, .. })
+    ));
+}
+
+#[test]
+fn load_jsonl_reports_io_and_empty_files() {
+    let dir = std::env::temp_dir().join(format!("picopit-sim-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let empty = dir.join("empty.jsonl");
+    std::fs::write(&empty, "\n\n").unwrap();
+    assert!(matches!(sim::load_jsonl(&empty), Err(ScenarioError::Empty { .. })));
+    assert!(matches!(
+        sim::load_jsonl(dir.join("missing.jsonl")),
+        Err(ScenarioError::Io { .. })
+    ));
+    let ok = dir.join("ok.jsonl");
+    std::fs::write(&ok, format!("{}\n{}\n", common::curved(), common::straight())).unwrap();
+    assert_eq!(sim::load_jsonl(&ok).unwrap().len(), 2);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn initial_states_follow_the_road() {
+    let sc = Scenario::from_json_line(&common::curved().to_string(), 1).unwrap();
+    let road = sc.build_road().unwrap();
+    let x = sc.target_state(&road);
+    // s = 60 m is 10 m into the clothoid: heading κ'σ²/2 = (1/200)/30 · 100 / 2.
+    let heading = 1.0 / 200.0 / 30.0 * 100.0 / 2.0;
+    assert!((x[2] - heading).abs() < 1e-9, "{}", x[2]);
+    let p = road.project(dynamics::geometry::Vec2::new(x[6], x[7]));
+    assert!((p.s - 60.0).abs() < 1e-6 && (p.d + 1.75).abs() < 1e-6);
+    let b = sc.bullet_state(&road);
+    assert!((b[3] - 18.0).abs() < 1e-12);
+}
+
+#[test]
+fn a_lane_keeping_target_stays_in_its_lane_on_the_curve() {
+    use dynamics::plant::{Plant, PlantConfig, VehicleInit};
+    let sc = Scenario::from_json_line(&common::curved().to_string(), 1).unwrap();
+    let params = sc.params.load().unwrap();
+    let road = sc.build_road().unwrap();
+    let mut plant = Plant::new(&params, PlantConfig { mu: sc.mu, ..PlantConfig::default() }).unwrap();
+    let (_, ti) = sc.initial_states(&road);
+    plant.reset(&VehicleInit { x: -1e5, ..VehicleInit::default() }, &ti);
+    let mut driver = sc.target_driver(&params);
+    let mut worst: f64 = 0.0;
+    for k in 0..200 {
+        let x = plant.target_state();
+        let (d, b) = driver.command(k as f64 * 0.05, None, &x, &road);
+        plant.set_target_command(d, b);
+        plant.advance(0.05);
+        let x = plant.target_state();
+        let f = road.project(dynamics::geometry::Vec2::new(x[6], x[7]));
+        worst = worst.max((f.d + 1.75).abs());
+    }
+    // 10 s, through the clothoid into the arc: within 0.5 m of the lane centre.
+    assert!(worst < 0.5, "lane error {worst}");
+}
