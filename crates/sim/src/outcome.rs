@@ -429,8 +429,8 @@ impl Monitor {
         self.contacts
             .sample(t, touching, closing, &self.settings, self.stabilising_since);
         let oc = plant.obstacle_contacts();
-        for i in 0..2 {
-            self.latched_obstacle[i] |= oc[i].is_some();
+        for (latched, contact) in self.latched_obstacle.iter_mut().zip(oc) {
+            *latched |= contact.is_some();
         }
     }
 

@@ -74,7 +74,8 @@ fn missing_unknown_and_mistyped_fields_are_named() {
 
 #[test]
 fn ranges_and_consistency_are_checked() {
-    let cases: Vec<(&str, Box<dyn Fn(&mut serde_json::Value)>)> = vec![
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let cases: Vec<(&str, Edit)> = vec![
         ("mu", Box::new(|v| v["mu"] = json!(0.0))),
         ("adhesion", Box::new(|v| v["adhesion"] = json!("low"))),
         ("road.radius", Box::new(|v| v["category"] = json!("straight_highway"))),
