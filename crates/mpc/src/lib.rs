@@ -8,6 +8,8 @@
 //!   envelope C_B and the target's reversed heading, per step.
 //! * [`mpc`]: [`CoupledMpc`], its input, output and status.
 //! * [`plan`]: a predicted trajectory with its inputs, forces, geometry and Jacobians.
+//! * [`qp`]: a QP with a fixed sparsity pattern, assembled in place and solved by Clarabel
+//!   (also used by the planner).
 //! * [`geom`]: the gap, road and obstacle linearisations.
 //! * [`clock`]: the injected clock of the time budget.
 //!
@@ -17,7 +19,7 @@ pub mod clock;
 pub mod geom;
 pub mod mpc;
 pub mod plan;
-mod qp;
+pub mod qp;
 pub mod reference;
 pub mod settings;
 

@@ -18,7 +18,7 @@ use std::sync::Arc;
 const OUTER_TIMER: &str = "picopit";
 
 /// Writes matrix entries, either recording the pattern or filling values.
-pub(crate) struct Emitter<'a> {
+pub struct Emitter<'a> {
     mode: Mode<'a>,
     /// Keep only the upper triangle (for P).
     upper: bool,
@@ -34,7 +34,7 @@ enum Mode<'a> {
 }
 
 impl<'a> Emitter<'a> {
-    pub(crate) fn pattern(pairs: &'a mut Vec<(usize, usize)>, upper: bool) -> Self {
+    pub fn pattern(pairs: &'a mut Vec<(usize, usize)>, upper: bool) -> Self {
         pairs.clear();
         Self {
             mode: Mode::Pattern(pairs),
@@ -42,7 +42,7 @@ impl<'a> Emitter<'a> {
         }
     }
 
-    pub(crate) fn values(slots: &'a [usize], nzval: &'a mut [f64], upper: bool) -> Self {
+    pub fn values(slots: &'a [usize], nzval: &'a mut [f64], upper: bool) -> Self {
         nzval.fill(0.0);
         Self {
             mode: Mode::Values {
@@ -57,7 +57,7 @@ impl<'a> Emitter<'a> {
     /// Add `v` at `(r, c)` (values at the same place accumulate). For an upper-triangular
     /// matrix, an entry below the diagonal goes to its mirror.
     #[inline]
-    pub(crate) fn put(&mut self, r: usize, c: usize, v: f64) {
+    pub fn put(&mut self, r: usize, c: usize, v: f64) {
         let (r, c) = if self.upper && r > c { (c, r) } else { (r, c) };
         match &mut self.mode {
             Mode::Pattern(pairs) => pairs.push((r, c)),
@@ -69,7 +69,7 @@ impl<'a> Emitter<'a> {
     }
 
     /// Number of entries written in values mode; panics (a bug) if the pattern differs.
-    pub(crate) fn finish(self) {
+    pub fn finish(self) {
         if let Mode::Values { slots, next, .. } = self.mode {
             assert_eq!(next, slots.len(), "QP assembly wrote a different pattern");
         }
@@ -77,14 +77,14 @@ impl<'a> Emitter<'a> {
 }
 
 /// A CSC structure built from `(row, col)` pairs, with the slot of every pair.
-pub(crate) struct Pattern {
+pub struct Pattern {
     pub matrix: CscMatrix<f64>,
     /// `slots[i]` is the index into `nzval` of the i-th emitted pair.
     pub slots: Vec<usize>,
 }
 
 impl Pattern {
-    pub(crate) fn build(m: usize, n: usize, pairs: &[(usize, usize)]) -> Self {
+    pub fn build(m: usize, n: usize, pairs: &[(usize, usize)]) -> Self {
         let mut order: Vec<usize> = (0..pairs.len()).collect();
         order.sort_by_key(|&i| (pairs[i].1, pairs[i].0));
         let mut colptr = vec![0usize; n + 1];
@@ -143,7 +143,7 @@ impl QpStatus {
 }
 
 /// The Clarabel solver with its data, updated in place.
-pub(crate) struct Qp {
+pub struct Qp {
     pub n: usize,
     pub m: usize,
     solver: DefaultSolver<f64>,
@@ -204,7 +204,7 @@ type Rebuild = (
 
 /// Clarabel settings for the MPC's QPs. Clarabel's own `time_limit` stays infinite: the
 /// limit `s.time_limit` is enforced per solve by [`Qp`]'s termination callback.
-pub(crate) fn clarabel_settings(s: &crate::settings::QpSettings) -> DefaultSettings<f64> {
+pub fn clarabel_settings(s: &crate::settings::QpSettings) -> DefaultSettings<f64> {
     DefaultSettings {
         max_iter: s.max_iter,
         time_limit: f64::INFINITY,
@@ -227,7 +227,7 @@ impl Qp {
     /// Build the solver from the patterns (values all zero but the diagonal of P, which
     /// Clarabel's regularisation makes harmless) and the cones: `n_eq` equality rows first,
     /// then nonnegative rows.
-    pub(crate) fn new(
+    pub fn new(
         p: Pattern,
         a: Pattern,
         n_eq: usize,
@@ -280,13 +280,13 @@ impl Qp {
     }
 
     /// Set the per-solve time limit (s).
-    pub(crate) fn set_time_limit(&mut self, limit: f64) {
+    pub fn set_time_limit(&mut self, limit: f64) {
         self.deadline.limit.store(limit.to_bits(), Ordering::Relaxed);
     }
 
     /// Push the current values into the solver and solve (within the time limit given at
     /// construction).
-    pub(crate) fn solve(&mut self) -> QpStatus {
+    pub fn solve(&mut self) -> QpStatus {
         if let Some((mut p, mut a, settings, cones)) = self.rebuild.take() {
             p.nzval.copy_from_slice(&self.p_val);
             a.nzval.copy_from_slice(&self.a_val);
@@ -330,7 +330,7 @@ impl Qp {
     }
 
     /// Replace the Clarabel settings (not on the hot path: it allocates).
-    pub(crate) fn update_settings(&mut self, settings: DefaultSettings<f64>) -> Result<(), String> {
+    pub fn update_settings(&mut self, settings: DefaultSettings<f64>) -> Result<(), String> {
         if let Some(r) = self.rebuild.as_mut() {
             r.2 = settings.clone();
         }
@@ -340,7 +340,7 @@ impl Qp {
     }
 
     /// `½ zᵀ P z + qᵀ z` at `self.z`, with the current (not yet solved) data.
-    pub(crate) fn objective_at_z(&self) -> f64 {
+    pub fn objective_at_z(&self) -> f64 {
         let z = &self.z;
         let mut v = 0.0;
         for c in 0..self.n {
@@ -354,15 +354,15 @@ impl Qp {
         v
     }
 
-    pub(crate) fn x(&self) -> &[f64] {
+    pub fn x(&self) -> &[f64] {
         &self.solver.solution.x
     }
 
-    pub(crate) fn iterations(&self) -> u32 {
+    pub fn iterations(&self) -> u32 {
         self.solver.solution.iterations
     }
 
-    pub(crate) fn objective(&self) -> f64 {
+    pub fn objective(&self) -> f64 {
         self.solver.solution.obj_val
     }
 }

@@ -1,0 +1,356 @@
+//! One controller for the whole maneuver: the upper decision layer (every `replan_period`
+//! and on each phase change), the coupled MPC (every step) and the phase machine.
+
+use crate::decision::{wrap, PlanError, Planner, PlannerError, PlannerInput};
+use crate::href::fill_reference;
+use crate::package::{DecisionPackage, Mode};
+use crate::phase::{AbortReason, Phase, PhaseMachine, PhaseObservation};
+use crate::settings::ControllerSettings;
+use dynamics::bullet::{BulletInput, BulletState};
+use dynamics::geometry::{Obb, Pose2, Vec2};
+use dynamics::params::ParamSet;
+use dynamics::road::{Obstacle, Road};
+use dynamics::target::idx;
+use dynamics::{TargetInput, TargetModel, TargetState};
+use mpc::geom::pair_geometry;
+use mpc::reference::DefaultPit;
+use mpc::{Clock, CoupledMpc, MonotonicClock, MpcError, MpcInput, MpcStatus, Reference, Side};
+
+/// What the controller sees each control step.
+#[derive(Debug, Clone, Copy)]
+pub struct ControllerInput<'a> {
+    /// Time now (s), on the clock the obstacles' motion refers to.
+    pub time: f64,
+    pub target: TargetState,
+    pub bullet: BulletState,
+    /// The target driver's input as estimated (predicted constant).
+    pub target_input: TargetInput,
+    pub road: &'a Road,
+    pub obstacles: &'a [Obstacle],
+}
+
+/// What one control step decided.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControllerOutput {
+    /// The command to apply now: `[δ_f, T_r]` (negative T_r brakes). Always finite.
+    pub command: BulletInput,
+    pub phase: Phase,
+    /// The upper layer's current mode (None when it is off).
+    pub mode: Option<Mode>,
+    pub abort: Option<AbortReason>,
+    /// The MPC's status, when it ran this step.
+    pub mpc_status: Option<MpcStatus>,
+    /// Whether the upper layer planned this step, and how long it took (s).
+    pub replanned: bool,
+    pub plan_time: f64,
+    /// Time of the whole control step, planning excluded (s).
+    pub ctrl_time: f64,
+}
+
+/// Construction errors.
+#[derive(Debug, thiserror::Error)]
+pub enum ControllerError {
+    #[error(transparent)]
+    Settings(#[from] crate::settings::SettingsError),
+    #[error(transparent)]
+    Planner(#[from] PlannerError),
+    #[error(transparent)]
+    Mpc(#[from] MpcError),
+}
+
+/// Bad input to a control step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum StepError {
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    #[error("controller input: {0}")]
+    Mpc(#[from] mpc::SolveError),
+}
+
+/// The hierarchical PIT controller.
+///
+/// Memory: the planner and the MPC (see theirs), one [`Reference`] of N stages; nothing is
+/// allocated by [`PitController::step`].
+pub struct PitController {
+    settings: ControllerSettings,
+    params: ParamSet,
+    planner: Planner,
+    mpc: CoupledMpc,
+    default_pit: DefaultPit,
+    reference: Reference,
+    phases: PhaseMachine,
+    last_command: BulletInput,
+    next_replan: f64,
+    started: bool,
+    clock: Box<dyn Clock + Send + Sync>,
+}
+
+impl std::fmt::Debug for PitController {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PitController")
+            .field("upper_layer", &self.settings.upper_layer)
+            .field("planner", &self.planner)
+            .field("mpc", &self.mpc)
+            .field("phase", &self.phases.phase())
+            .finish_non_exhaustive()
+    }
+}
+
+impl PitController {
+    /// Build the controller. The planner and the MPC each get their own instance of the
+    /// target model (the same kind: 4-DOF, PINN or PicoPINN).
+    ///
+    /// # Errors
+    /// Invalid settings (named), a model whose step differs, or a QP Clarabel refuses.
+    pub fn new(
+        params: &ParamSet,
+        mu: f64,
+        mpc_model: Box<dyn TargetModel + Send + Sync>,
+        planner_model: Box<dyn TargetModel + Send + Sync>,
+        settings: ControllerSettings,
+    ) -> Result<Self, ControllerError> {
+        settings.validate()?;
+        let planner = Planner::new(params, mu, planner_model, settings.planner.clone())?;
+        let mpc = CoupledMpc::new(params, mu, mpc_model, settings.mpc.clone())?;
+        Ok(Self {
+            reference: Reference::new(settings.mpc.horizon),
+            phases: PhaseMachine::new(settings.phases.clone()),
+            default_pit: DefaultPit::new(params, Side::Left),
+            params: params.clone(),
+            planner,
+            mpc,
+            last_command: BulletInput::zeros(),
+            next_replan: f64::NEG_INFINITY,
+            started: false,
+            clock: Box::new(MonotonicClock::new()),
+            settings,
+        })
+    }
+
+    /// Read planning and control times from `clock` (the MPC's time budget too).
+    #[must_use]
+    pub fn with_clock(
+        mut self,
+        clock_planner: Box<dyn Clock + Send + Sync>,
+        clock_mpc: Box<dyn Clock + Send + Sync>,
+    ) -> Self {
+        self.clock = clock_planner;
+        self.mpc = self.mpc.with_clock(clock_mpc);
+        self
+    }
+
+    #[must_use]
+    pub fn settings(&self) -> &ControllerSettings {
+        &self.settings
+    }
+
+    #[must_use]
+    pub fn phase(&self) -> Phase {
+        self.phases.phase()
+    }
+
+    #[must_use]
+    pub fn abort_reason(&self) -> Option<AbortReason> {
+        self.phases.abort_reason()
+    }
+
+    /// The last decision package (upper layer on).
+    #[must_use]
+    pub fn package(&self) -> Option<&DecisionPackage> {
+        self.settings.upper_layer.then(|| self.planner.package())
+    }
+
+    #[must_use]
+    pub fn mpc(&self) -> &CoupledMpc {
+        &self.mpc
+    }
+
+    #[must_use]
+    pub fn reference(&self) -> &Reference {
+        &self.reference
+    }
+
+    #[must_use]
+    pub fn target_model_name(&self) -> &str {
+        self.mpc.target_model_name()
+    }
+
+    #[must_use]
+    pub fn target_param_count(&self) -> usize {
+        self.mpc.target_param_count()
+    }
+
+    /// Start a new maneuver (phase chasing, no plan, MPC warm start dropped).
+    pub fn reset(&mut self) {
+        self.started = false;
+        self.next_replan = f64::NEG_INFINITY;
+        self.last_command = BulletInput::zeros();
+        self.mpc.reset();
+    }
+
+    fn footprints(&self, xt: &TargetState, xb: &BulletState) -> (Obb, Obb) {
+        let t = &self.params.target;
+        let b = &self.params.bullet;
+        (
+            Obb::vehicle_footprint(
+                &Pose2::new(xb[0], xb[1], xb[2]),
+                b.length,
+                b.width,
+                b.cg_to_front,
+            ),
+            Obb::vehicle_footprint(
+                &Pose2::new(xt[idx::X], xt[idx::Y], xt[idx::PSI]),
+                t.length,
+                t.width,
+                t.cg_to_front,
+            ),
+        )
+    }
+
+    /// One control step.
+    ///
+    /// # Errors
+    /// [`StepError`] for bad input (a non-finite state, too many obstacles); never for a
+    /// numerical outcome, which is a status with a safe command.
+    pub fn step(&mut self, input: &ControllerInput<'_>) -> Result<ControllerOutput, StepError> {
+        let t0 = self.clock.now();
+        if input.target.iter().any(|v| !v.is_finite())
+            || input.bullet.iter().any(|v| !v.is_finite())
+        {
+            return Err(StepError::Plan(PlanError::NonFiniteState));
+        }
+        if !self.started {
+            self.started = true;
+            self.phases.reset(input.time);
+            let rel = crate::href::relative_position(&input.target, &input.bullet);
+            let side = if rel.y >= 0.0 { Side::Left } else { Side::Right };
+            self.default_pit = DefaultPit::new(&self.params, side);
+        }
+        let (fb, ft) = self.footprints(&input.target, &input.bullet);
+        let gap = pair_geometry(&fb, &ft).gap;
+        let xb = &input.bullet;
+        let bullet_speed = xb[3].hypot(xb[4]);
+        let mut clearance = f64::INFINITY;
+        for o in input.obstacles {
+            clearance = clearance.min(pair_geometry(&o.footprint_at(input.time), &fb).gap);
+        }
+        let upper = self.settings.upper_layer;
+        let pkg = self.planner.package();
+        let obs = PhaseObservation {
+            time: input.time,
+            gap,
+            mode: upper.then_some(pkg.mode).filter(|_| self.next_replan.is_finite()),
+            infeasible: pkg.infeasible,
+            window: (upper && pkg.has_window()).then_some(pkg.window),
+            target_speed: input.target[idx::VX].hypot(input.target[idx::VY]),
+            target_yaw_rate: input.target[idx::R],
+            bullet_speed,
+            bullet_yaw_rate: xb[5],
+            bullet_slip: if xb[3].abs() > 0.5 {
+                xb[4].atan2(xb[3].abs())
+            } else {
+                0.0
+            },
+            bullet_clearance: clearance,
+        };
+        let changed = self.phases.update(&obs);
+        let phase = self.phases.phase();
+        // The upper layer: replan on its period and on every phase change.
+        let mut replanned = false;
+        let mut plan_time = 0.0;
+        if upper && phase.is_active() && (changed || input.time + 1e-9 >= self.next_replan) {
+            let tp = self.clock.now();
+            // During the PIT the side is committed: only its window and forces are replanned.
+            let committed = (phase == Phase::Pit && self.planner.package().mode == Mode::Pit)
+                .then(|| self.planner.package().side);
+            let pin = PlannerInput {
+                time: input.time,
+                target: input.target,
+                bullet: input.bullet,
+                target_input: input.target_input,
+                road: input.road,
+                obstacles: input.obstacles,
+                side: committed,
+            };
+            let pkg = self.planner.plan(&pin)?;
+            if phase == Phase::Chasing && pkg.mode == Mode::Abort {
+                let reason = pkg.infeasible.unwrap_or(crate::Infeasible::Numerical);
+                self.phases
+                    .abort(AbortReason::DecisionInfeasible(reason), input.time);
+            }
+            self.next_replan = input.time + self.settings.planner.replan_period;
+            replanned = true;
+            plan_time = self.clock.now() - tp;
+        }
+        let phase = self.phases.phase();
+        let lane = input
+            .road
+            .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
+            .heading;
+        let mut mpc_status = None;
+        let command = if phase.is_active() {
+            let dt = self.settings.mpc.dt;
+            if upper {
+                fill_reference(
+                    self.planner.package(),
+                    &self.settings.planner,
+                    &mut self.reference,
+                    &input.target,
+                    &input.bullet,
+                    input.time,
+                    dt,
+                );
+            } else {
+                self.default_pit.fill(
+                    &mut self.reference,
+                    input.target.as_slice(),
+                    input.bullet.as_slice(),
+                    dt,
+                    lane,
+                );
+            }
+            let out = self.mpc.solve(&MpcInput {
+                time: input.time,
+                target: input.target,
+                bullet: input.bullet,
+                target_input: input.target_input,
+                last_command: self.last_command,
+                road: Some(input.road),
+                obstacles: input.obstacles,
+                reference: &self.reference,
+            })?;
+            mpc_status = Some(out.status);
+            out.command
+        } else {
+            self.safe_stop(input)
+        };
+        self.last_command = command;
+        let total = self.clock.now() - t0;
+        Ok(ControllerOutput {
+            command,
+            phase,
+            mode: upper.then(|| self.planner.package().mode),
+            abort: self.phases.abort_reason(),
+            mpc_status,
+            replanned,
+            plan_time,
+            ctrl_time: (total - plan_time).max(0.0),
+        })
+    }
+
+    /// Controlled braking along the road: steer the bullet's heading onto the road's, brake
+    /// at `abort_brake` of the torque range.
+    fn safe_stop(&self, input: &ControllerInput<'_>) -> BulletInput {
+        let xb = &input.bullet;
+        let b = &self.params.bullet;
+        let road_heading = input.road.project(Vec2::new(xb[0], xb[1])).heading;
+        let err = wrap(road_heading - xb[2]);
+        let delta = (0.8 * err - 0.1 * xb[5]).clamp(-0.5 * b.steer_max, 0.5 * b.steer_max);
+        let brake = if xb[3] > 0.2 {
+            -self.settings.phases.abort_brake * b.drive_torque_max.abs().max(b.drive_torque_min.abs())
+        } else {
+            0.0
+        };
+        BulletInput::new(delta, brake)
+    }
+}

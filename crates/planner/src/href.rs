@@ -1,0 +1,124 @@
+//! h_ref(Π, x_T, x_B, C_F, C_B) → e_ref: the MPC's reference from the decision package.
+
+use crate::package::{DecisionPackage, Mode};
+use crate::settings::PlannerSettings;
+use dynamics::bullet::BulletState;
+use dynamics::geometry::{Pose2, Vec2};
+use dynamics::target::idx;
+use dynamics::TargetState;
+use mpc::{Reference, StageReference};
+
+/// The bullet's position relative to the target, in the target's frame.
+#[must_use]
+pub fn relative_position(xt: &TargetState, xb: &BulletState) -> Vec2 {
+    Pose2::new(xt[idx::X], xt[idx::Y], xt[idx::PSI]).body_from_world(Vec2::new(xb[0], xb[1]))
+}
+
+/// Fill the MPC reference for the control step at `time` (stage k refers to
+/// `time + (k + 1)·dt`).
+///
+/// * PIT: close in on the stand-off line beside the contact station so as to arrive
+///   `turn_in` before the window, turn in to the contact pose (C_B), hold it over the
+///   window T_c with the planned force corridor C_F, then fall back behind and outside.
+///   The target objective tracks the planned heading at the end of the MPC's horizon
+///   (the virtual rollout's prediction), so the MPC pushes as much as the plan needs.
+/// * Chase: close in to just behind the contact station, no force.
+/// * Stabilise and abort: fall back, no force, no target objective.
+pub fn fill_reference(
+    pkg: &DecisionPackage,
+    s: &PlannerSettings,
+    r: &mut Reference,
+    xt: &TargetState,
+    xb: &BulletState,
+    time: f64,
+    dt: f64,
+) {
+    let rel = relative_position(xt, xb);
+    let side = pkg.side.sign();
+    let contact = StageReference {
+        rel_pos: pkg.contact_rel_pos,
+        rel_heading: pkg.contact_rel_heading,
+        rel_speed: pkg.push_speed,
+        track: 1.0,
+        fn_lo: 0.0,
+        fn_hi: 0.0,
+        envelope_lat: pkg.envelope_lat,
+    };
+    let stand = Vec2::new(contact.rel_pos.x, contact.rel_pos.y + side * s.standoff);
+    let back = StageReference {
+        rel_pos: Vec2::new(
+            contact.rel_pos.x - 3.0,
+            contact.rel_pos.y + side * (s.standoff + 1.0),
+        ),
+        rel_heading: 0.0,
+        rel_speed: -2.0,
+        track: 0.3,
+        fn_lo: 0.0,
+        fn_hi: 0.0,
+        envelope_lat: 1.0e3,
+    };
+    let n = r.stages.len();
+    let horizon_end = time + n as f64 * dt;
+    match pkg.mode {
+        Mode::Pit => {
+            let (t0, t1) = pkg.window;
+            let arrive = (t0 - s.turn_in).max(time + dt);
+            for (k, st) in r.stages.iter_mut().enumerate() {
+                let tau = time + (k + 1) as f64 * dt;
+                *st = if tau < t0 - s.turn_in {
+                    approach(rel, stand, time, arrive, tau, s.approach_speed)
+                } else if tau <= t1 {
+                    let (lo, hi) = pkg
+                        .step_at(tau.max(t0))
+                        .map_or((0.0, 0.0), |p| p.corridor);
+                    StageReference {
+                        fn_lo: if tau >= t0 { lo } else { 0.0 },
+                        fn_hi: hi,
+                        ..contact
+                    }
+                } else {
+                    back
+                };
+            }
+            r.target_heading = pkg.heading_at(horizon_end).unwrap_or(pkg.terminal.heading);
+            r.target_weight = if horizon_end >= t0 { 1.0 } else { 0.0 };
+        }
+        Mode::Chase => {
+            let hold = Vec2::new(stand.x - 1.0, stand.y);
+            let arrive = time + ((hold.x - rel.x).abs() / s.approach_speed).max(dt);
+            for (k, st) in r.stages.iter_mut().enumerate() {
+                let tau = time + (k + 1) as f64 * dt;
+                *st = approach(rel, hold, time, arrive, tau, s.approach_speed);
+            }
+            r.target_heading = pkg.terminal.heading;
+            r.target_weight = 0.0;
+        }
+        Mode::Stabilise | Mode::Abort => {
+            r.stages.iter_mut().for_each(|st| *st = back);
+            r.target_heading = pkg.terminal.heading;
+            r.target_weight = 0.0;
+        }
+    }
+}
+
+/// A stage of the approach: from the current relative position `rel` (at `time`) to
+/// `goal` at `arrive`, linearly, then held.
+fn approach(rel: Vec2, goal: Vec2, time: f64, arrive: f64, tau: f64, speed_cap: f64) -> StageReference {
+    let span = (arrive - time).max(1e-3);
+    let a = ((tau - time) / span).clamp(0.0, 1.0);
+    let pos = rel + (goal - rel) * a;
+    let v = if tau < arrive {
+        ((goal.x - rel.x) / span).clamp(-speed_cap, speed_cap)
+    } else {
+        0.0
+    };
+    StageReference {
+        rel_pos: pos,
+        rel_heading: 0.0,
+        rel_speed: v,
+        track: 1.0,
+        fn_lo: 0.0,
+        fn_hi: 0.0,
+        envelope_lat: 1.5,
+    }
+}

@@ -1,0 +1,264 @@
+//! The phase machine: chasing → PIT → stabilisation → done, abort from any active phase.
+
+use crate::package::{Infeasible, Mode};
+use crate::settings::PhaseSettings;
+
+/// A phase of the maneuver.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// Reach the planned relative pose.
+    Chasing,
+    /// Hold the contact corridor over the window.
+    Pit,
+    /// Separate, keep clear, let the target settle.
+    Stabilising,
+    /// The target has settled (or the stabilisation timed out): the maneuver is over.
+    Done,
+    /// Stopped: the bullet brakes to a halt.
+    Aborted,
+}
+
+impl Phase {
+    /// Whether the maneuver is still running (chasing or PIT).
+    #[must_use]
+    pub fn is_active(self) -> bool {
+        matches!(self, Self::Chasing | Self::Pit)
+    }
+}
+
+/// Why the maneuver was aborted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AbortReason {
+    /// The upper layer found no feasible PIT decision while chasing.
+    DecisionInfeasible(Infeasible),
+    /// No contact within the chasing timeout.
+    ChaseTimeout,
+    /// The safety monitor: the bullet's yaw rate or side slip beyond its limit.
+    BulletUnstable,
+    /// The safety monitor: the bullet too close to an obstacle.
+    BulletClearance,
+}
+
+/// What the phase machine observes each control step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhaseObservation {
+    pub time: f64,
+    /// Signed distance between the two footprints (m; negative = overlapping).
+    pub gap: f64,
+    /// The upper layer's mode and window, if it runs.
+    pub mode: Option<Mode>,
+    pub infeasible: Option<Infeasible>,
+    pub window: Option<(f64, f64)>,
+    /// Target speed (m/s) and yaw rate (rad/s).
+    pub target_speed: f64,
+    pub target_yaw_rate: f64,
+    /// Bullet speed (m/s), yaw rate (rad/s), side slip (rad) and least obstacle clearance (m).
+    pub bullet_speed: f64,
+    pub bullet_yaw_rate: f64,
+    pub bullet_slip: f64,
+    pub bullet_clearance: f64,
+}
+
+/// The phase machine with its timeouts and safety monitor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PhaseMachine {
+    settings: PhaseSettings,
+    phase: Phase,
+    entered: f64,
+    contacted: bool,
+    abort: Option<AbortReason>,
+}
+
+impl PhaseMachine {
+    #[must_use]
+    pub fn new(settings: PhaseSettings) -> Self {
+        Self {
+            settings,
+            phase: Phase::Chasing,
+            entered: 0.0,
+            contacted: false,
+            abort: None,
+        }
+    }
+
+    /// Start over in chasing at `time`.
+    pub fn reset(&mut self, time: f64) {
+        self.phase = Phase::Chasing;
+        self.entered = time;
+        self.contacted = false;
+        self.abort = None;
+    }
+
+    #[must_use]
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// Time the current phase was entered (s).
+    #[must_use]
+    pub fn entered(&self) -> f64 {
+        self.entered
+    }
+
+    #[must_use]
+    pub fn abort_reason(&self) -> Option<AbortReason> {
+        self.abort
+    }
+
+    /// Whether the bullet has touched the target in this maneuver.
+    #[must_use]
+    pub fn contacted(&self) -> bool {
+        self.contacted
+    }
+
+    fn enter(&mut self, phase: Phase, time: f64) {
+        self.phase = phase;
+        self.entered = time;
+    }
+
+    /// Abort now, from an active phase (ignored once the maneuver is over).
+    pub fn abort(&mut self, reason: AbortReason, time: f64) {
+        if self.phase.is_active() {
+            self.abort = Some(reason);
+            self.enter(Phase::Aborted, time);
+        }
+    }
+
+    /// Advance on an observation; returns whether the phase changed.
+    pub fn update(&mut self, o: &PhaseObservation) -> bool {
+        let s = &self.settings;
+        let before = self.phase;
+        let in_phase = o.time - self.entered;
+        if o.gap <= s.contact_gap {
+            self.contacted = true;
+        }
+        if self.phase.is_active() {
+            let unstable = o.bullet_yaw_rate.abs() > s.bullet_yaw_rate_max
+                || (o.bullet_speed > s.monitor_speed && o.bullet_slip.abs() > s.bullet_slip_max);
+            if unstable {
+                self.abort(AbortReason::BulletUnstable, o.time);
+                return true;
+            }
+            if o.bullet_clearance < s.bullet_clearance_min {
+                self.abort(AbortReason::BulletClearance, o.time);
+                return true;
+            }
+        }
+        match self.phase {
+            Phase::Chasing => {
+                if o.mode == Some(Mode::Abort) {
+                    let reason = o.infeasible.unwrap_or(Infeasible::TerminalSetUnreachable);
+                    self.abort(AbortReason::DecisionInfeasible(reason), o.time);
+                } else if o.gap <= s.contact_gap {
+                    self.enter(Phase::Pit, o.time);
+                } else if in_phase > s.chase_timeout {
+                    self.abort(AbortReason::ChaseTimeout, o.time);
+                }
+            }
+            Phase::Pit => {
+                let window_over = o.window.is_some_and(|(_, t1)| o.time > t1 + 0.25);
+                let released = self.contacted && o.gap > s.release_gap;
+                if released || (window_over && o.gap > s.contact_gap) || in_phase > s.pit_timeout
+                {
+                    self.enter(Phase::Stabilising, o.time);
+                }
+            }
+            Phase::Stabilising => {
+                let settled = o.target_speed < s.settle_speed
+                    && o.target_yaw_rate.abs() < s.settle_yaw_rate;
+                if settled || in_phase > s.stabilise_timeout {
+                    self.enter(Phase::Done, o.time);
+                }
+            }
+            Phase::Done | Phase::Aborted => {}
+        }
+        self.phase != before
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn obs(time: f64, gap: f64) -> PhaseObservation {
+        PhaseObservation {
+            time,
+            gap,
+            mode: Some(Mode::Pit),
+            infeasible: None,
+            window: Some((1.0, 1.6)),
+            target_speed: 15.0,
+            target_yaw_rate: 0.0,
+            bullet_speed: 16.0,
+            bullet_yaw_rate: 0.0,
+            bullet_slip: 0.0,
+            bullet_clearance: 10.0,
+        }
+    }
+
+    #[test]
+    fn a_maneuver_runs_through_its_phases() {
+        let mut m = PhaseMachine::new(PhaseSettings::default());
+        m.reset(0.0);
+        assert!(!m.update(&obs(0.5, 1.0)));
+        assert_eq!(m.phase(), Phase::Chasing);
+        assert!(m.update(&obs(1.0, 0.0)));
+        assert_eq!(m.phase(), Phase::Pit);
+        assert!(!m.update(&obs(1.3, -0.02)));
+        assert!(m.update(&obs(1.9, 0.8)));
+        assert_eq!(m.phase(), Phase::Stabilising);
+        let mut o = obs(3.0, 5.0);
+        o.target_speed = 0.2;
+        o.target_yaw_rate = 0.05;
+        assert!(m.update(&o));
+        assert_eq!(m.phase(), Phase::Done);
+        assert_eq!(m.abort_reason(), None);
+    }
+
+    #[test]
+    fn every_phase_times_out_and_the_monitor_aborts() {
+        let s = PhaseSettings::default();
+        let mut m = PhaseMachine::new(s.clone());
+        m.reset(0.0);
+        m.update(&obs(s.chase_timeout + 0.1, 2.0));
+        assert_eq!(m.phase(), Phase::Aborted);
+        assert_eq!(m.abort_reason(), Some(AbortReason::ChaseTimeout));
+
+        m.reset(0.0);
+        m.update(&obs(0.1, 0.0));
+        let mut o = obs(0.2, 0.0);
+        o.window = None;
+        m.update(&o);
+        assert_eq!(m.phase(), Phase::Pit);
+        let mut o = obs(0.2 + s.pit_timeout, 0.0);
+        o.window = None;
+        m.update(&o);
+        assert_eq!(m.phase(), Phase::Stabilising);
+        m.update(&obs(0.3 + s.pit_timeout + s.stabilise_timeout, 5.0));
+        assert_eq!(m.phase(), Phase::Done);
+
+        m.reset(0.0);
+        let mut o = obs(0.5, 1.0);
+        o.bullet_yaw_rate = s.bullet_yaw_rate_max + 0.1;
+        m.update(&o);
+        assert_eq!(m.abort_reason(), Some(AbortReason::BulletUnstable));
+
+        m.reset(0.0);
+        let mut o = obs(0.5, 1.0);
+        o.mode = Some(Mode::Abort);
+        o.infeasible = Some(Infeasible::RoadBoundary);
+        m.update(&o);
+        assert_eq!(
+            m.abort_reason(),
+            Some(AbortReason::DecisionInfeasible(Infeasible::RoadBoundary))
+        );
+        // Over is over: no abort after the maneuver ended.
+        m.abort(AbortReason::ChaseTimeout, 1.0);
+        assert_eq!(
+            m.abort_reason(),
+            Some(AbortReason::DecisionInfeasible(Infeasible::RoadBoundary))
+        );
+    }
+}

@@ -1,0 +1,466 @@
+//! Settings of the decision layer, the phase machine and the controller: serde structs with
+//! defaults, validated when the controller is built, loadable from TOML.
+
+use mpc::MpcSettings;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// A setting that cannot be used; the message names the field.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum SettingsError {
+    #[error("planner settings: `{field}` {problem}")]
+    Invalid { field: String, problem: String },
+    #[error("planner settings: {0}")]
+    Parse(String),
+    #[error(transparent)]
+    Mpc(#[from] mpc::SettingsError),
+}
+
+fn invalid(field: &str, problem: impl Into<String>) -> SettingsError {
+    SettingsError::Invalid {
+        field: field.to_owned(),
+        problem: problem.into(),
+    }
+}
+
+/// Weights of the virtual-PIT objective `J_plan + λ_T J_T` (dimensionless: each applies to
+/// a quantity divided by its scale).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlanWeights {
+    /// λ_T: weight of the target-response objective J_T.
+    pub lambda_t: f64,
+    /// w_ψ: projected terminal heading error (per rad²).
+    pub heading: f64,
+    /// w_v: terminal target speed (per (m/s)²).
+    pub speed: f64,
+    /// w_c: squared distance of u_T^vir to the comfortable corridor C_F (per force_scale²).
+    pub corridor: f64,
+    /// J_plan: interaction effort Σ (F_n / force_scale)² (a gentler push is preferred).
+    pub effort: f64,
+    /// J_plan: smoothness Σ (ΔF / force_scale)² between consecutive steps.
+    pub smooth: f64,
+    /// J_plan: cost per second of delay of the contact window (earlier is preferred).
+    pub delay: f64,
+    /// Exact-penalty weight of the soft road, obstacle and post-PIT rows (per metre).
+    pub penalty: f64,
+    /// Proximal weight on the force step (per force_scale²).
+    pub proximal: f64,
+}
+
+impl Default for PlanWeights {
+    fn default() -> Self {
+        Self {
+            lambda_t: 1.0,
+            heading: 40.0,
+            speed: 0.05,
+            corridor: 5.0,
+            effort: 0.05,
+            smooth: 0.2,
+            delay: 1.0,
+            penalty: 200.0,
+            proximal: 0.05,
+        }
+    }
+}
+
+/// The upper virtual-PIT decision layer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlannerSettings {
+    /// Look-ahead of the virtual PIT rollout (s); a multiple of `dt`.
+    pub horizon: f64,
+    /// Step of the rollout (s); must equal the target model's.
+    pub dt: f64,
+    /// Replanning period (s); the controller also replans on every phase change.
+    pub replan_period: f64,
+    /// Longest contact window (s): the virtual force may act over this long.
+    pub window: f64,
+    /// Window starts tried after the earliest arrival (s, ≥ 0, ascending).
+    pub start_offsets: Vec<f64>,
+    /// Sides tried: both by default.
+    pub try_both_sides: bool,
+    /// SCP iterations per candidate.
+    pub scp_iterations: u32,
+    /// The road, obstacle rows are imposed at every `row_stride`-th step (and the last).
+    pub row_stride: usize,
+    /// Largest normal force of the virtual interaction and its scale in the weights, in
+    /// units of the target's weight m_T g (so that one setting serves both vehicle sizes).
+    pub force_max_g: f64,
+    pub force_scale_g: f64,
+    /// Upper edge of the comfortable corridor C_F as a fraction of `force_max`.
+    pub corridor_fraction: f64,
+    /// Body-panel friction μ_c of the cone |F_t| ≤ μ_c F_n.
+    pub friction: f64,
+    /// Trust region on the force step per SCP iteration (× m_T g).
+    pub trust_force_g: f64,
+    /// Initial guess of the normal force over the window (× m_T g).
+    pub force_guess_g: f64,
+    /// Contact geometry on the target's rear quarter: the bullet's contact angle (rad), its
+    /// overlap (m) and its relative push speed (m/s), as in `mpc::reference::pit_stage`.
+    pub contact_angle: f64,
+    pub overlap: f64,
+    pub push_speed: f64,
+    /// Bullet approach model for the earliest arrival: closing speed relative to the target
+    /// (m/s), lateral speed (m/s) and a settling time (s).
+    pub approach_speed: f64,
+    pub lateral_speed: f64,
+    pub settle_time: f64,
+    /// Stand-off outside the contact line while closing in (m).
+    pub standoff: f64,
+    /// Time before the window at which the bullet turns in (s).
+    pub turn_in: f64,
+    /// Terminal set X_T,f: the projected heading `ψ_N + τ r_N` within `heading_tol` of the
+    /// reversed heading (the yaw goes on after the look-ahead; τ is its decay time).
+    pub heading_tol: f64,
+    pub yaw_decay: f64,
+    /// Deceleration of the spun, sliding target used for the post-PIT stopping point
+    /// (fraction of μ g).
+    pub stop_decel_fraction: f64,
+    /// Road-edge margin of the target's footprint (m).
+    pub road_margin: f64,
+    /// Obstacle clearance d_safe (m).
+    pub obstacle_clearance: f64,
+    /// A candidate is feasible when no soft row is violated by more than this (m).
+    pub violation_tol: f64,
+    pub weights: PlanWeights,
+    /// Clarabel settings of the planner's QPs.
+    pub qp: mpc::settings::QpSettings,
+}
+
+impl Default for PlannerSettings {
+    fn default() -> Self {
+        Self {
+            horizon: 2.0,
+            dt: 0.05,
+            replan_period: 1.0,
+            window: 0.6,
+            start_offsets: vec![0.0, 0.3],
+            try_both_sides: true,
+            scp_iterations: 3,
+            row_stride: 2,
+            force_max_g: 2.5,
+            force_scale_g: 0.7,
+            corridor_fraction: 0.6,
+            friction: 0.3,
+            trust_force_g: 0.8,
+            force_guess_g: 0.5,
+            contact_angle: 12f64.to_radians(),
+            overlap: 0.05,
+            push_speed: 1.0,
+            approach_speed: 2.5,
+            lateral_speed: 1.0,
+            settle_time: 0.3,
+            standoff: 0.6,
+            turn_in: 0.4,
+            heading_tol: 0.6,
+            yaw_decay: 0.4,
+            stop_decel_fraction: 0.7,
+            road_margin: 0.2,
+            obstacle_clearance: 0.5,
+            violation_tol: 0.05,
+            weights: PlanWeights::default(),
+            qp: mpc::settings::QpSettings {
+                time_limit: 0.02,
+                ..mpc::settings::QpSettings::default()
+            },
+        }
+    }
+}
+
+impl PlannerSettings {
+    /// Steps of the rollout.
+    #[must_use]
+    pub fn steps(&self) -> usize {
+        (self.horizon / self.dt).round().max(0.0) as usize
+    }
+
+    /// Steps of the longest window.
+    #[must_use]
+    pub fn window_steps(&self) -> usize {
+        (self.window / self.dt).round().max(1.0) as usize
+    }
+
+    /// Check every field.
+    ///
+    /// # Errors
+    /// [`SettingsError::Invalid`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        let positive = [
+            ("horizon", self.horizon),
+            ("dt", self.dt),
+            ("replan_period", self.replan_period),
+            ("window", self.window),
+            ("force_max_g", self.force_max_g),
+            ("force_scale_g", self.force_scale_g),
+            ("corridor_fraction", self.corridor_fraction),
+            ("trust_force_g", self.trust_force_g),
+            ("approach_speed", self.approach_speed),
+            ("lateral_speed", self.lateral_speed),
+            ("heading_tol", self.heading_tol),
+            ("stop_decel_fraction", self.stop_decel_fraction),
+            ("violation_tol", self.violation_tol),
+            ("weights.penalty", self.weights.penalty),
+            ("weights.proximal", self.weights.proximal),
+            ("qp.tol_gap", self.qp.tol_gap),
+            ("qp.tol_feas", self.qp.tol_feas),
+            ("qp.time_limit", self.qp.time_limit),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(invalid(name, format!("must be finite and > 0 (got {v})")));
+            }
+        }
+        let w = &self.weights;
+        let non_negative = [
+            ("friction", self.friction),
+            ("force_guess_g", self.force_guess_g),
+            ("contact_angle", self.contact_angle),
+            ("overlap", self.overlap),
+            ("push_speed", self.push_speed),
+            ("settle_time", self.settle_time),
+            ("standoff", self.standoff),
+            ("turn_in", self.turn_in),
+            ("yaw_decay", self.yaw_decay),
+            ("road_margin", self.road_margin),
+            ("obstacle_clearance", self.obstacle_clearance),
+            ("weights.lambda_t", w.lambda_t),
+            ("weights.heading", w.heading),
+            ("weights.speed", w.speed),
+            ("weights.corridor", w.corridor),
+            ("weights.effort", w.effort),
+            ("weights.smooth", w.smooth),
+            ("weights.delay", w.delay),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(name, format!("must be finite and >= 0 (got {v})")));
+            }
+        }
+        let steps = self.horizon / self.dt;
+        if (steps - steps.round()).abs() > 1e-9 || !(4.0..=400.0).contains(&steps.round()) {
+            return Err(invalid(
+                "horizon",
+                "must be a whole number (4 to 400) of steps dt",
+            ));
+        }
+        if self.window_steps() + 1 >= self.steps() {
+            return Err(invalid("window", "must be shorter than the horizon"));
+        }
+        if self.start_offsets.is_empty() || self.start_offsets.len() > 8 {
+            return Err(invalid("start_offsets", "needs 1 to 8 entries"));
+        }
+        if self
+            .start_offsets
+            .windows(2)
+            .any(|p| !(p[1] > p[0]) || !p[0].is_finite())
+            || self.start_offsets.iter().any(|v| !(v.is_finite() && *v >= 0.0))
+        {
+            return Err(invalid(
+                "start_offsets",
+                "must be finite, >= 0 and strictly ascending",
+            ));
+        }
+        if self.row_stride == 0 || self.row_stride > self.steps() {
+            return Err(invalid("row_stride", "must be in 1..=steps"));
+        }
+        if self.scp_iterations == 0 || self.scp_iterations > 20 {
+            return Err(invalid("scp_iterations", "must be in 1..=20"));
+        }
+        if self.corridor_fraction > 1.0 {
+            return Err(invalid("corridor_fraction", "must be at most 1"));
+        }
+        if self.force_guess_g > self.force_max_g {
+            return Err(invalid("force_guess_g", "must not exceed force_max_g"));
+        }
+        if self.qp.max_iter == 0 {
+            return Err(invalid("qp.max_iter", "must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+/// Timeouts and thresholds of the phase machine and its safety monitor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PhaseSettings {
+    /// Longest time in each phase (s).
+    pub chase_timeout: f64,
+    pub pit_timeout: f64,
+    pub stabilise_timeout: f64,
+    /// Gap (m) at or below which the vehicles count as in contact.
+    pub contact_gap: f64,
+    /// Gap (m) beyond which, after a contact, the PIT counts as over.
+    pub release_gap: f64,
+    /// The target counts as settled below this speed (m/s) and yaw rate (rad/s).
+    pub settle_speed: f64,
+    pub settle_yaw_rate: f64,
+    /// Safety monitor: the bullet's largest yaw rate (rad/s) and side-slip angle (rad, above
+    /// `monitor_speed` m/s) before the maneuver is aborted.
+    pub bullet_yaw_rate_max: f64,
+    pub bullet_slip_max: f64,
+    pub monitor_speed: f64,
+    /// Safety monitor: the bullet's least clearance to an obstacle (m).
+    pub bullet_clearance_min: f64,
+    /// Braking torque of the abort command (fraction of the bullet's drive-torque limit).
+    pub abort_brake: f64,
+}
+
+impl Default for PhaseSettings {
+    fn default() -> Self {
+        Self {
+            chase_timeout: 12.0,
+            pit_timeout: 2.0,
+            stabilise_timeout: 10.0,
+            contact_gap: 0.05,
+            release_gap: 0.5,
+            settle_speed: 0.5,
+            settle_yaw_rate: 0.1,
+            bullet_yaw_rate_max: 1.5,
+            bullet_slip_max: 0.35,
+            monitor_speed: 3.0,
+            bullet_clearance_min: 0.2,
+            abort_brake: 0.8,
+        }
+    }
+}
+
+impl PhaseSettings {
+    /// Check every field.
+    ///
+    /// # Errors
+    /// [`SettingsError::Invalid`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        let positive = [
+            ("phases.chase_timeout", self.chase_timeout),
+            ("phases.pit_timeout", self.pit_timeout),
+            ("phases.stabilise_timeout", self.stabilise_timeout),
+            ("phases.release_gap", self.release_gap),
+            ("phases.settle_speed", self.settle_speed),
+            ("phases.settle_yaw_rate", self.settle_yaw_rate),
+            ("phases.bullet_yaw_rate_max", self.bullet_yaw_rate_max),
+            ("phases.bullet_slip_max", self.bullet_slip_max),
+            ("phases.abort_brake", self.abort_brake),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(invalid(name, format!("must be finite and > 0 (got {v})")));
+            }
+        }
+        for (name, v) in [
+            ("phases.contact_gap", self.contact_gap),
+            ("phases.monitor_speed", self.monitor_speed),
+            ("phases.bullet_clearance_min", self.bullet_clearance_min),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(name, format!("must be finite and >= 0 (got {v})")));
+            }
+        }
+        if self.release_gap <= self.contact_gap {
+            return Err(invalid("phases.release_gap", "must exceed contact_gap"));
+        }
+        if self.abort_brake > 1.0 {
+            return Err(invalid("phases.abort_brake", "must be at most 1"));
+        }
+        Ok(())
+    }
+}
+
+/// Everything the controller needs: the upper layer (switchable off for the ablation), the
+/// phase machine and the MPC.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ControllerSettings {
+    /// Run the upper virtual-PIT decision layer; off, the MPC follows the fixed default
+    /// reference (`mpc::reference::DefaultPit`), the paper's "without upper layer".
+    pub upper_layer: bool,
+    pub planner: PlannerSettings,
+    pub phases: PhaseSettings,
+    pub mpc: MpcSettings,
+}
+
+impl Default for ControllerSettings {
+    fn default() -> Self {
+        Self {
+            upper_layer: true,
+            planner: PlannerSettings::default(),
+            phases: PhaseSettings::default(),
+            mpc: MpcSettings::default(),
+        }
+    }
+}
+
+impl ControllerSettings {
+    /// Parse and validate TOML (missing fields take their defaults).
+    ///
+    /// # Errors
+    /// [`SettingsError::Parse`] for malformed TOML or unknown fields, otherwise the first bad
+    /// value.
+    pub fn from_toml_str(text: &str) -> Result<Self, SettingsError> {
+        let s: Self = toml::from_str(text).map_err(|e| SettingsError::Parse(e.to_string()))?;
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// The settings as TOML.
+    #[must_use]
+    pub fn to_toml_string(&self) -> String {
+        toml::to_string(self).expect("settings serialise")
+    }
+
+    /// Check every field, and that the planner and the MPC share their step.
+    ///
+    /// # Errors
+    /// The first bad value, named.
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        self.planner.validate()?;
+        self.phases.validate()?;
+        self.mpc.validate()?;
+        if (self.planner.dt - self.mpc.dt).abs() > 1e-12 {
+            return Err(invalid("planner.dt", "must equal mpc.dt"));
+        }
+        let mpc_span = self.mpc.horizon as f64 * self.mpc.dt;
+        if self.planner.horizon + 1e-9 < mpc_span + self.planner.replan_period.min(mpc_span) {
+            return Err(invalid(
+                "planner.horizon",
+                "must cover the MPC horizon after a full replanning period",
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_round_trip_through_toml() {
+        let s = ControllerSettings::default();
+        s.validate().unwrap();
+        let back = ControllerSettings::from_toml_str(&s.to_toml_string()).unwrap();
+        assert_eq!(s, back);
+    }
+
+    #[test]
+    fn bad_values_name_their_field() {
+        let cases = [
+            ("[planner]\nhorizon = 2.01", "horizon"),
+            ("[planner]\nwindow = 3.0", "window"),
+            ("[planner]\nstart_offsets = [0.3, 0.1]", "start_offsets"),
+            ("[planner]\nforce_max_g = -1.0", "force_max_g"),
+            ("[planner.weights]\npenalty = 0.0", "weights.penalty"),
+            ("[phases]\nrelease_gap = 0.01", "phases.release_gap"),
+            ("[planner]\ndt = 0.1", "horizon"),
+            ("[mpc]\nhorizon = 1", "horizon"),
+        ];
+        for (text, field) in cases {
+            let e = ControllerSettings::from_toml_str(text).unwrap_err().to_string();
+            assert!(e.contains(field), "{text:?} gave {e:?}");
+        }
+        let e = ControllerSettings::from_toml_str("[planner]\nhorizn = 2.0")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("horizn"), "{e}");
+    }
+}
