@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 mod models;
 mod mpc;
 mod plant;
+mod sim;
 mod surrogate;
 
 pyo3::create_exception!(
@@ -167,5 +168,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     models::register(m)?;
     surrogate::register(m)?;
     mpc::register(m)?;
+    sim::register(m)?;
     Ok(())
 }

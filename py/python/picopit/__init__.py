@@ -48,3 +48,10 @@ def load_params_dict(name_or_path: str) -> Dict[str, Any]:
     Raises :class:`ParamError` (a ``ValueError``) naming the offending field.
     """
     return _toml.loads(load_params(name_or_path))
+
+# The scenario dataset (crates/sim): loader, validation and screening.
+for _name in ("ScenarioError", "load_scenarios", "validate_scenario_line", "screen_scenario",
+              "scenario_initial_states"):
+    if hasattr(_core, _name):
+        globals()[_name] = getattr(_core, _name)
+        __all__.append(_name)

@@ -340,3 +340,36 @@ class CoupledMpc:
     ) -> Tuple[float, float]:
         """(merit, largest violation) of the plan that ``u`` (N, 2) and ``f`` (N, 2) produce."""
     def reset(self) -> None: ...
+
+# --- scenarios (crates/sim) -------------------------------------------------------------
+
+class ScenarioError(ValueError):
+    """A scenario file or line that cannot be used; the message names the line and the field."""
+
+class ScreenResult(TypedDict):
+    verdict: str
+    """``keep``, ``trivial``, ``impossible`` or ``rejected``."""
+    reason: str
+    t_fail: Optional[float]
+    t_stop: Optional[float]
+    t_reach: float
+    simulated: float
+    min_margin: float
+
+class InitialStates(TypedDict):
+    bullet: _F64
+    """``[X, Y, yaw, vx, vy, r]``."""
+    target: _F64
+    """``[vx, vy, yaw, r, p, phi, X, Y]``."""
+
+def load_scenarios(path: str) -> List[Dict[str, Any]]:
+    """Read and validate a JSON-lines scenario file; a bad line raises ScenarioError naming
+    its line number and field."""
+def validate_scenario_line(text: str, line: int = 1) -> Dict[str, Any]:
+    """Validate one scenario (JSON text); returns it as a dict."""
+def screen_scenario(text: str) -> ScreenResult:
+    """Rule and short-simulation screening of one scenario (the GIL is released)."""
+def scenario_initial_states(text: str) -> InitialStates: ...
+def road_poses(road: str, s: _ArrayLike, d: Optional[_ArrayLike] = None) -> _F64:
+    """(n, 3) ``[x, y, heading]`` of a scenario road (JSON of its ``road`` object) at
+    stations ``s``, offset laterally by ``d``."""

@@ -176,6 +176,30 @@ def _eval_parser(sub) -> None:
     p.set_defaults(func=_cmd_eval)
 
 
+def _scenarios_parser(sub) -> None:
+    p = sub.add_parser(
+        "scenarios",
+        help="the PIT Scenario Dataset: sample from the priors, screen, select (jsonl + manifest)",
+        description=(
+            "Sample N scenarios conditionally on the priors table, screen them (geometry rules, "
+            "then the target alone on the plant: trivial and impossible ones are dropped), select "
+            "KEEP stratified by road category (22/18/60 %%), compare with the priors by per-attribute "
+            "KL divergence. Writes OUT/scenarios.jsonl, OUT/scenarios.manifest.json and two figures."
+        ),
+    )
+    p.add_argument("--priors", default="data/priors.csv", metavar="CSV", help="priors table (default data/priors.csv)")
+    p.add_argument("--out", default="data", metavar="DIR", help="output folder (default data)")
+    p.add_argument("--n", type=int, default=3600, metavar="N", help="scenarios to generate (default 3600)")
+    p.add_argument("--keep", type=int, default=2048, metavar="K", help="scenarios to retain (default 2048)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
+    p.add_argument("--workers", type=int, default=2, metavar="W", help="screening threads (default 2)")
+    p.add_argument("--write-priors", action="store_true",
+                   help="first (re)write the priors table from the documented design (design_priors)")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_scenarios)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -192,6 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     _train_parser(sub)
     _compress_parser(sub)
     _eval_parser(sub)
+    _scenarios_parser(sub)
     return parser
 
 
@@ -397,6 +422,32 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    from . import scenarios as sc
+    from .surrogate_nn import git_commit
+
+    priors_path = Path(args.priors)
+    if args.write_priors:
+        n = sc.write_priors(priors_path)
+        print(f"scenarios: wrote {n} priors to {priors_path}")
+    priors = sc.load_priors(priors_path)
+    cfg = sc.GenerateConfig(n=args.n, keep=args.keep, seed=args.seed, workers=args.workers).validate()
+    res = sc.generate(priors, cfg, progress=not args.no_progress)
+    extra = {"seed": cfg.seed, "command": _command_line(_ARGV), "priors": str(priors_path),
+             "priors_sha256": sc.sha256_file(priors_path), "git_commit": git_commit(),
+             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+    paths = sc.write_outputs(res, Path(args.out), extra, figures=not args.no_figures)
+    c = res.counts
+    shares = ", ".join(f"{k} {100 * v / max(1, c['retained']):.1f} %"
+                       for k, v in res.composition["retained"]["category"].items())
+    print(f"scenarios: {c['generated']} generated from {c['priors']} priors -> {c['rule_rejected']} rejected by "
+          f"rules, {c['trivial']} trivial, {c['impossible']} impossible, {c['screened_keep']} kept -> "
+          f"{c['retained']} retained ({shares}) in {res.seconds:.0f} s (seed {cfg.seed})")
+    print("scenarios: KL(retained || priors) nats: " + ", ".join(f"{k} {v:.3f}" for k, v in res.kl["retained"].items()))
+    print("scenarios: wrote " + ", ".join(str(p) for p in paths.values()))
+    return 0
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     from . import ParamError
     from .simulate import ConfigError
@@ -412,6 +463,11 @@ def main(argv: Optional[List[str]] = None) -> int:
         from .train import TrainError
 
         bad_input += (DatasetError, ModelFileError, TrainError)
+    if args.command == "scenarios":
+        from .scenarios import ScenarioGenError
+        from ._core import ScenarioError
+
+        bad_input += (ScenarioGenError, ScenarioError)
     try:
         return int(args.func(args))
     except bad_input as e:
