@@ -69,6 +69,15 @@ fn main() {
         peak = peak.max(fc);
         if out.replanned || out.phase != last_phase || step % 5 == 0 || fc > 0.0 {
             let pkg = ctl.package();
+            let mp = ctl.mpc().plan();
+            let r = ctl.reference();
+            if std::env::var("MPC_DEBUG").is_ok() {
+                println!(
+                    "    mpc: ψT_N pred {:.1}° ref {:.1}° w {:.0} | f0 {:.0} f5 {:.0} corridor0 ({:.0},{:.0}) | relpos ref {:?}",
+                    mp.xt[mp.xt.len() - 1][2].to_degrees(), r.target_heading.to_degrees(), r.target_weight,
+                    mp.f[0].x, mp.f[5].x, r.stages[0].fn_lo, r.stages[0].fn_hi, (r.stages[0].rel_pos.x, r.stages[0].rel_pos.y)
+                );
+            }
             println!(
                 "t={t:5.2} {:?} {:?} {:?} plan={:5.2}ms ctrl={:5.2}ms | Fn={fc:6.0} | ψT={:6.1}° rT={:5.2} vT={:5.2} YT={:5.2} | ψB={:6.1}° vB={:5.2} YB={:5.2} | cmd ({:6.3},{:7.1}) {}",
                 out.phase, out.mode, out.mpc_status, out.plan_time * 1e3, out.ctrl_time * 1e3,

@@ -31,6 +31,7 @@ fn main() {
         road: &road,
         obstacles: &[],
         side: None,
+        best_effort: false,
     };
     let mut times = Vec::new();
     for _ in 0..400 {

@@ -271,6 +271,7 @@ impl PitController {
                 road: input.road,
                 obstacles: input.obstacles,
                 side: committed,
+                best_effort: phase == Phase::Pit,
             };
             let pkg = self.planner.plan(&pin)?;
             if phase == Phase::Chasing && pkg.mode == Mode::Abort {
@@ -278,7 +279,12 @@ impl PitController {
                 self.phases
                     .abort(AbortReason::DecisionInfeasible(reason), input.time);
             }
-            self.next_replan = input.time + self.settings.planner.replan_period;
+            let period = if phase == Phase::Pit {
+                self.settings.planner.replan_period_pit
+            } else {
+                self.settings.planner.replan_period
+            };
+            self.next_replan = input.time + period;
             replanned = true;
             plan_time = self.clock.now() - tp;
         }

@@ -53,6 +53,9 @@ pub struct PlannerInput<'a> {
     /// Restrict the search to this side (a committed PIT); `None` tries the sides the
     /// settings allow.
     pub side: Option<Side>,
+    /// During a PIT under way, disengaging is not an option: when no candidate is
+    /// feasible, the best one is still returned as [`Mode::Pit`] (with the reason set).
+    pub best_effort: bool,
 }
 
 /// Bad input to the planner (never a numerical outcome: that is a [`Mode`]).
@@ -317,8 +320,8 @@ impl Planner {
         let rel = pose.body_from_world(Vec2::new(xb[0], xb[1]));
         let mut dx = (c.rel_pos.x - rel.x).abs();
         let dy = (c.rel_pos.y - rel.y).abs();
-        if dx.hypot(dy) < 0.3 {
-            // At the contact pose already (a PIT under way).
+        if dx.hypot(dy) < 0.3 || self.gap(xt, xb) < 0.1 {
+            // At the contact pose, or touching already: a PIT under way.
             return 0.0;
         }
         if side.sign() * rel.y < 0.0 {
@@ -373,7 +376,13 @@ impl Planner {
         };
         for &side in sides {
             let t_arr = self.earliest_arrival(side, &input.target, &input.bullet);
-            for oi in 0..self.settings.start_offsets.len() {
+            // In contact already: the window starts now.
+            let offsets = if t_arr == 0.0 {
+                1
+            } else {
+                self.settings.start_offsets.len()
+            };
+            for oi in 0..offsets {
                 let t0 = t_arr + self.settings.start_offsets[oi];
                 let k0 = (t0 / self.settings.dt - 1e-9).ceil().max(0.0) as usize;
                 if k0 + self.w > self.n {
@@ -384,6 +393,14 @@ impl Planner {
                     numerical += 1;
                     continue;
                 };
+                if std::env::var("PLAN_DEBUG").is_ok() {
+                    let xn = self.xs[self.n];
+                    eprintln!(
+                        "cand {side:?} k0 {k0}: {o:?} psiN {:.2} rN {:.2} psi_rev {:.2} F {:?}",
+                        xn[idx::PSI], xn[idx::R], self.psi_rev,
+                        self.forces.iter().map(|f| (f.x.round(), f.y.round())).collect::<Vec<_>>()
+                    );
+                }
                 let heading_ok = o.heading_error <= self.settings.heading_tol;
                 let tol = self.settings.violation_tol;
                 let road_ok = o.road_margin >= -tol && o.stop_margin >= -tol;
@@ -411,12 +428,12 @@ impl Planner {
         let chosen = best.or(best_any);
         let mode = if candidates == 0 {
             Mode::Chase
-        } else if best.is_some() {
+        } else if best.is_some() || (input.best_effort && best_any.is_some()) {
             Mode::Pit
         } else {
             Mode::Abort
         };
-        let infeasible = (mode == Mode::Abort).then(|| {
+        let infeasible = (best.is_none() && candidates > 0).then(|| {
             if numerical == candidates {
                 Infeasible::Numerical
             } else if reasons[2] {
@@ -586,6 +603,18 @@ impl Planner {
         }
     }
 
+    /// Signed distance between the two vehicles' footprints (m).
+    fn gap(&self, xt: &TargetState, xb: &BulletState) -> f64 {
+        let b = &self.params.bullet;
+        let fb = Obb::vehicle_footprint(
+            &Pose2::new(xb[0], xb[1], xb[2]),
+            b.length,
+            b.width,
+            b.cg_to_front,
+        );
+        pair_geometry(&fb, &self.footprint(xt)).gap
+    }
+
     fn footprint(&self, x: &TargetState) -> Obb {
         let t = &self.params.target;
         Obb::vehicle_footprint(
@@ -696,8 +725,7 @@ impl Planner {
         input: &PlannerInput<'_>,
     ) -> Option<Outcome> {
         self.setup_candidate(side, k0, lane);
-        let guess = self.settings.force_guess_g * self.weight;
-        self.forces.iter_mut().for_each(|f| *f = Vec2::new(guess, 0.0));
+        self.initial_guess(input);
         self.rollout(&input.target, false, true);
         self.linearise_rows(input.road, input.obstacles);
         let mut current = self.merit(false);
@@ -756,6 +784,36 @@ impl Planner {
             clearance: current.3,
             stop_margin: current.4,
         })
+    }
+
+    /// The SCP's starting point: the best of a small grid of constant pushes (level ×
+    /// duration from the window's start) by the nonlinear merit, rolled out without
+    /// Jacobians. The yaw response to a push is strongly nonlinear (the tyres saturate), so
+    /// one fixed guess can start the SCP far beyond the reversed heading.
+    fn initial_guess(&mut self, input: &PlannerInput<'_>) {
+        const LEVELS: [f64; 6] = [0.0, 0.15, 0.3, 0.5, 0.75, 1.0];
+        const DURATIONS: [f64; 3] = [0.34, 0.67, 1.0];
+        let top = self.settings.force_guess_g * self.weight * 2.0;
+        let mut best = (f64::INFINITY, 0.0, 0usize);
+        for &d in &DURATIONS {
+            let m = ((d * self.w as f64).round() as usize).clamp(1, self.w);
+            for &lv in &LEVELS[1..] {
+                let f = (lv * top).min(self.force_max);
+                for (j, t) in self.trial.iter_mut().enumerate() {
+                    *t = if j < m { Vec2::new(f, 0.0) } else { Vec2::zeros() };
+                }
+                self.rollout(&input.target, true, false);
+                self.linearise_rows(input.road, input.obstacles);
+                let merit = self.merit(true).0;
+                if merit < best.0 {
+                    best = (merit, f, m);
+                }
+            }
+        }
+        let (_, f, m) = best;
+        for (j, t) in self.forces.iter_mut().enumerate() {
+            *t = if j < m { Vec2::new(f, 0.0) } else { Vec2::zeros() };
+        }
     }
 
     /// Write the QP's data at the current linearisation (values mode).

@@ -74,6 +74,9 @@ pub struct PlannerSettings {
     pub dt: f64,
     /// Replanning period (s); the controller also replans on every phase change.
     pub replan_period: f64,
+    /// Replanning period while in contact (s): the contact is where the prediction is
+    /// least certain, so the window and forces are refreshed more often there.
+    pub replan_period_pit: f64,
     /// Longest contact window (s): the virtual force may act over this long.
     pub window: f64,
     /// Window starts tried after the earliest arrival (s, ≥ 0, ascending).
@@ -94,7 +97,7 @@ pub struct PlannerSettings {
     pub friction: f64,
     /// Trust region on the force step per SCP iteration (× m_T g).
     pub trust_force_g: f64,
-    /// Initial guess of the normal force over the window (× m_T g).
+    /// Scale of the initial-guess grid: constant pushes up to twice this (× m_T g).
     pub force_guess_g: f64,
     /// Contact geometry on the target's rear quarter: the bullet's contact angle (rad), its
     /// overlap (m) and its relative push speed (m/s), as in `mpc::reference::pit_stage`.
@@ -134,6 +137,7 @@ impl Default for PlannerSettings {
             horizon: 2.0,
             dt: 0.05,
             replan_period: 1.0,
+            replan_period_pit: 0.25,
             window: 0.6,
             start_offsets: vec![0.0, 0.3],
             try_both_sides: true,
@@ -190,6 +194,7 @@ impl PlannerSettings {
             ("horizon", self.horizon),
             ("dt", self.dt),
             ("replan_period", self.replan_period),
+            ("replan_period_pit", self.replan_period_pit),
             ("window", self.window),
             ("force_max_g", self.force_max_g),
             ("force_scale_g", self.force_scale_g),
@@ -451,7 +456,7 @@ mod tests {
             ("[planner]\nforce_max_g = -1.0", "force_max_g"),
             ("[planner.weights]\npenalty = 0.0", "weights.penalty"),
             ("[phases]\nrelease_gap = 0.01", "phases.release_gap"),
-            ("[planner]\ndt = 0.1", "horizon"),
+            ("[planner]\ndt = 0.1", "planner.dt"),
             ("[mpc]\nhorizon = 1", "horizon"),
         ];
         for (text, field) in cases {
