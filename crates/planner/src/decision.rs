@@ -360,10 +360,8 @@ impl Planner {
             .heading;
         let mut best: Option<Outcome> = None;
         let mut best_any: Option<Outcome> = None;
-        let mut reasons = [false; 3];
         let mut candidates = 0u32;
         let mut feasible = 0u32;
-        let mut numerical = 0u32;
         let sides: &[Side] = match input.side {
             Some(Side::Left) => &[Side::Left],
             Some(Side::Right) => &[Side::Right],
@@ -390,7 +388,6 @@ impl Planner {
                 }
                 candidates += 1;
                 let Some(o) = self.evaluate(side, k0, lane, input) else {
-                    numerical += 1;
                     continue;
                 };
                 if std::env::var("PLAN_DEBUG").is_ok() {
@@ -411,12 +408,7 @@ impl Planner {
                         best = Some(o);
                         self.best.copy_from_slice(&self.forces);
                     }
-                } else {
-                    reasons[0] |= !heading_ok;
-                    reasons[1] |= heading_ok && !road_ok;
-                    reasons[2] |= heading_ok && road_ok && !obs_ok;
-                }
-                if best.is_none() && best_any.is_none_or(|b| o.objective < b.objective) {
+                } else if best.is_none() && best_any.is_none_or(|b| o.objective < b.objective) {
                     best_any = Some(o);
                     self.best.copy_from_slice(&self.forces);
                 }
@@ -433,16 +425,19 @@ impl Planner {
         } else {
             Mode::Abort
         };
-        let infeasible = (best.is_none() && candidates > 0).then(|| {
-            if numerical == candidates {
-                Infeasible::Numerical
-            } else if reasons[2] {
+        // The reason is what binds the best infeasible candidate: a violated or active
+        // (within `BINDING` m) obstacle or road row explains why the heading was not
+        // reached; otherwise the push itself falls short (or overshoots).
+        const BINDING: f64 = 0.25;
+        let infeasible = (best.is_none() && candidates > 0).then(|| match best_any {
+            None => Infeasible::Numerical,
+            Some(o) if o.clearance < self.settings.obstacle_clearance + BINDING => {
                 Infeasible::ObstacleClearance
-            } else if reasons[1] {
-                Infeasible::RoadBoundary
-            } else {
-                Infeasible::TerminalSetUnreachable
             }
+            Some(o) if o.road_margin < BINDING || o.stop_margin < BINDING => {
+                Infeasible::RoadBoundary
+            }
+            Some(_) => Infeasible::TerminalSetUnreachable,
         });
         match chosen.filter(|_| mode == Mode::Pit) {
             Some(o) => {
@@ -1160,4 +1155,55 @@ fn assemble(v: &RowsView<'_>, ep: &mut Emitter<'_>, ea: &mut Emitter<'_>, q: &mu
     row += 1;
     debug_assert_eq!(row, l.rows());
     let _ = cols;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dynamics::target4dof::FourDofTarget;
+
+    /// The chained sensitivities ∂x_k/∂F (with γ turning with ψ) against central
+    /// differences of the nonlinear rollout.
+    #[test]
+    fn rollout_sensitivities_match_finite_differences() {
+        let params = ParamSet::builtin("full_size").unwrap();
+        let s = PlannerSettings::default();
+        let model = Box::new(FourDofTarget::new(&params.target, 0.9, s.dt));
+        let mut p = Planner::new(&params, 0.9, model, s).unwrap();
+        let mut x0 = TargetState::zeros();
+        x0[idx::VX] = 15.0;
+        x0[idx::R] = 0.2;
+        p.setup_candidate(Side::Left, 5, 0.0);
+        for (j, f) in p.forces.iter_mut().enumerate() {
+            *f = Vec2::new(4000.0 + 500.0 * j as f64, 300.0);
+        }
+        p.rollout(&x0, false, true);
+        let sens = p.sens.clone();
+        let cols = 2 * p.w;
+        let h = 1.0; // N
+        for j in [0, 3, p.w - 1] {
+            for d in 0..2 {
+                let base = p.forces.clone();
+                p.trial.copy_from_slice(&base);
+                p.trial[j][d] += h;
+                p.rollout(&x0, true, false);
+                let plus = p.xs.clone();
+                p.trial.copy_from_slice(&base);
+                p.trial[j][d] -= h;
+                p.rollout(&x0, true, false);
+                let minus = p.xs.clone();
+                for k in [p.k0 + j + 1, p.n] {
+                    for st in [idx::VY, idx::PSI, idx::R, idx::X, idx::Y] {
+                        let fd = (plus[k][st] - minus[k][st]) / (2.0 * h) * p.scale;
+                        let an = sens[k * 8 * cols + st * cols + 2 * j + d];
+                        let tol = 1e-5 + 2e-3 * an.abs().max(fd.abs());
+                        assert!(
+                            (fd - an).abs() < tol,
+                            "∂x{k}[{st}]/∂F{j}[{d}]: analytic {an}, differences {fd}"
+                        );
+                    }
+                }
+            }
+        }
+    }
 }

@@ -1,0 +1,215 @@
+//! The decision layer on scripted situations: the package is consistent, obstacles change
+//! the decision, no feasible decision is reported with its reason, and the search is
+//! deterministic.
+
+use dynamics::bullet::BulletState;
+use dynamics::params::ParamSet;
+use dynamics::road::{Obstacle, Road};
+use dynamics::target4dof::FourDofTarget;
+use dynamics::{TargetInput, TargetState};
+use planner::decision::wrap;
+use planner::{DecisionPackage, Infeasible, Mode, Planner, PlannerInput, PlannerSettings};
+
+fn params() -> ParamSet {
+    ParamSet::builtin("full_size").unwrap()
+}
+
+fn planner(settings: PlannerSettings) -> Planner {
+    let p = params();
+    let model = Box::new(FourDofTarget::new(&p.target, 0.9, settings.dt));
+    Planner::new(&p, 0.9, model, settings).unwrap()
+}
+
+fn road() -> Road {
+    Road::straight(3000.0, 3, 3.5, 1.0)
+}
+
+/// Target in the middle lane at `vt`, bullet at (`rx`, `ry`) from it at `vb`.
+fn states(road: &Road, rx: f64, ry: f64, vt: f64, vb: f64) -> (TargetState, BulletState) {
+    let lane = road.lane_center_offset(1);
+    let mut xt = TargetState::zeros();
+    xt[0] = vt;
+    xt[6] = 100.0;
+    xt[7] = lane;
+    let xb = BulletState::from_column_slice(&[100.0 + rx, lane + ry, 0.0, vb, 0.0, 0.0]);
+    (xt, xb)
+}
+
+fn input<'a>(road: &'a Road, obstacles: &'a [Obstacle], xt: TargetState, xb: BulletState) -> PlannerInput<'a> {
+    PlannerInput {
+        time: 3.0,
+        target: xt,
+        bullet: xb,
+        target_input: TargetInput::zeros(),
+        road,
+        obstacles,
+        side: None,
+        best_effort: false,
+    }
+}
+
+fn check_consistent(p: &DecisionPackage, s: &PlannerSettings, force_max: f64) {
+    let n = s.steps();
+    assert_eq!(p.steps.len(), n + 1);
+    for w in p.steps.windows(2) {
+        assert!((w[1].time - w[0].time - s.dt).abs() < 1e-9);
+    }
+    assert!((p.steps[0].time - p.time).abs() < 1e-12);
+    // The terminal set contains the reversed heading of the lane (heading 0 here).
+    assert!((wrap(p.terminal.heading - std::f64::consts::PI)).abs() < 1e-9, "{:?}", p.terminal);
+    for st in &p.steps {
+        let f = st.force;
+        assert!(f.x >= -1e-6 && f.x <= force_max + 1e-6, "F_n {} outside [0, {force_max}]", f.x);
+        assert!(f.y.abs() <= s.friction * f.x + 1e-6, "friction cone: {f:?}");
+        assert!(st.corridor.0 <= st.corridor.1 + 1e-9);
+        assert!(st.corridor.1 <= force_max + 1e-6);
+        let inside = p.has_window() && st.time >= p.window.0 - 1e-9 && st.time < p.window.1 - 1e-9;
+        if !inside {
+            assert_eq!(f.x, 0.0, "a force outside the window at t={}", st.time);
+            assert_eq!(st.corridor, (0.0, 0.0));
+        }
+    }
+    if p.mode == Mode::Pit {
+        assert!(p.has_window());
+        // The contact window lies inside the look-ahead.
+        assert!(p.window.0 >= p.time - 1e-9 && p.window.1 <= p.time + s.horizon + 1e-9, "{:?}", p.window);
+        assert!(p.predicted_heading_error <= s.heading_tol + 1e-9);
+        assert!(p.predicted_road_margin >= -s.violation_tol);
+        assert!(p.predicted_stop_margin >= -s.violation_tol);
+        // The safety set keeps clear of the obstacles.
+        assert!(p.predicted_clearance >= s.obstacle_clearance - s.violation_tol);
+        assert!(p.infeasible.is_none());
+        assert!(p.steps.iter().any(|st| st.force.x > 0.0), "a PIT with no force");
+    }
+}
+
+#[test]
+fn the_package_is_consistent_on_scripted_situations() {
+    let s = PlannerSettings::default();
+    let force_max = s.force_max_g * params().target.mass * 9.81;
+    let road = road();
+    let cases = [
+        // (rel x, rel y, v target, v bullet, expected mode)
+        (-6.0, 2.5, 15.0, 17.0, Mode::Pit),
+        (-5.0, -2.4, 15.0, 16.0, Mode::Pit),
+        (-30.0, 3.0, 15.0, 17.0, Mode::Chase),
+        (-3.7, 2.0, 15.0, 16.0, Mode::Pit),
+    ];
+    let mut p = planner(s.clone());
+    for (rx, ry, vt, vb, mode) in cases {
+        let (xt, xb) = states(&road, rx, ry, vt, vb);
+        let pkg = p.plan(&input(&road, &[], xt, xb)).unwrap().clone();
+        assert_eq!(pkg.mode, mode, "case ({rx}, {ry}): {:?} {:?}", pkg.mode, pkg.infeasible);
+        check_consistent(&pkg, &s, force_max);
+        if mode == Mode::Pit {
+            // The side the bullet is on, the target spun towards its reversal.
+            assert_eq!(pkg.side.sign(), ry.signum(), "case ({rx}, {ry})");
+            let last = pkg.steps.last().unwrap().target;
+            assert!(last[2] * ry.signum() > 1.0, "the target should be spinning: ψ_N {}", last[2]);
+        }
+    }
+}
+
+#[test]
+fn an_obstacle_where_the_target_would_spin_changes_the_decision_or_aborts() {
+    let s = PlannerSettings::default();
+    let road = road();
+    let (xt, xb) = states(&road, -6.0, 2.5, 15.0, 17.0);
+    let mut p = planner(s.clone());
+    let free = p.plan(&input(&road, &[], xt, xb)).unwrap().clone();
+    assert_eq!(free.mode, Mode::Pit);
+    // A parked car right where the unobstructed plan leaves the target.
+    let end = free.steps.last().unwrap().target;
+    let obstacle = Obstacle {
+        x: end[6] + 1.0,
+        y: end[7],
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    };
+    let obstacles = [obstacle];
+    let with = p.plan(&input(&road, &obstacles, xt, xb)).unwrap().clone();
+    let force_max = s.force_max_g * params().target.mass * 9.81;
+    check_consistent(&with, &s, force_max);
+    match with.mode {
+        Mode::Pit => {
+            assert!(
+                with.side != free.side || with.window != free.window || with.steps != free.steps,
+                "the same decision with an obstacle in the way"
+            );
+            assert!(with.predicted_clearance >= s.obstacle_clearance - s.violation_tol);
+        }
+        Mode::Abort => assert_eq!(with.infeasible, Some(Infeasible::ObstacleClearance)),
+        m => panic!("unexpected mode {m:?}"),
+    }
+    assert!(free.predicted_clearance > 100.0, "no obstacle, no clearance limit");
+}
+
+#[test]
+fn no_feasible_decision_is_reported_with_its_reason() {
+    // One narrow lane without shoulders: every push that spins the target round takes it
+    // over an edge.
+    let s = PlannerSettings::default();
+    let road = Road::straight(3000.0, 1, 3.0, 0.0);
+    let lane = road.lane_center_offset(0);
+    let mut xt = TargetState::zeros();
+    xt[0] = 25.0;
+    xt[6] = 100.0;
+    xt[7] = lane;
+    let xb = BulletState::from_column_slice(&[94.0, lane + 1.9, 0.0, 27.0, 0.0, 0.0]);
+    let mut p = planner(s);
+    let pkg = p.plan(&input(&road, &[], xt, xb)).unwrap();
+    assert_eq!(pkg.mode, Mode::Abort, "{:?}", pkg.infeasible);
+    assert_eq!(pkg.infeasible, Some(Infeasible::RoadBoundary));
+    assert!(pkg.candidates > 0 && pkg.feasible_candidates == 0);
+    assert!(!pkg.has_window());
+    assert!(!pkg.infeasible.unwrap().describe().is_empty());
+}
+
+#[test]
+fn the_same_inputs_give_the_same_package() {
+    let road = road();
+    let (xt, xb) = states(&road, -6.0, 2.5, 15.0, 17.0);
+    let obstacles = [Obstacle {
+        x: 150.0,
+        y: -3.5,
+        heading: 0.0,
+        vx: 8.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    }];
+    let mut a = planner(PlannerSettings::default());
+    let mut b = planner(PlannerSettings::default());
+    let pa = a.plan(&input(&road, &obstacles, xt, xb)).unwrap().clone();
+    // b plans something else first: no state may leak between plans.
+    let (xt2, xb2) = states(&road, -5.0, -2.4, 15.0, 16.0);
+    b.plan(&input(&road, &[], xt2, xb2)).unwrap();
+    let pb = b.plan(&input(&road, &obstacles, xt, xb)).unwrap().clone();
+    assert_eq!(pa, pb);
+    let pa2 = a.plan(&input(&road, &obstacles, xt, xb)).unwrap().clone();
+    assert_eq!(pa, pa2);
+}
+
+#[test]
+fn bad_input_is_an_error_not_a_panic() {
+    let road = road();
+    let (mut xt, xb) = states(&road, -6.0, 2.5, 15.0, 17.0);
+    let mut p = planner(PlannerSettings::default());
+    xt[2] = f64::NAN;
+    assert_eq!(
+        p.plan(&input(&road, &[], xt, xb)).unwrap_err(),
+        planner::PlanError::NonFiniteState
+    );
+    let many = vec![
+        Obstacle { x: 0.0, y: 50.0, heading: 0.0, vx: 0.0, vy: 0.0, length: 1.0, width: 1.0 };
+        planner::MAX_OBSTACLES + 1
+    ];
+    let (xt, xb) = states(&road, -6.0, 2.5, 15.0, 17.0);
+    assert_eq!(
+        p.plan(&input(&road, &many, xt, xb)).unwrap_err(),
+        planner::PlanError::TooManyObstacles
+    );
+}
