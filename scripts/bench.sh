@@ -28,4 +28,5 @@ EXTRA=("$@")
 run_bench picopit-dynamics models plant
 run_bench picopit-pico-nn pico
 run_bench picopit-mpc ctrl_step
+run_bench picopit-planner plan_step
 python3 scripts/bench_gate.py
