@@ -2,6 +2,7 @@
 //! plant into a PIT on a straight road: prints the maneuver.
 //!
 //! `cargo run --release -p picopit-planner --example pit_closed_loop [no-upper] [model PATH]`
+//! (environment: `CTL_TOML` controller settings, `MU`, `VT`, `DV`, `RX`, `RY`, `MPC_DEBUG`)
 
 use dynamics::params::ParamSet;
 use dynamics::plant::{Plant, PlantConfig, VehicleInit};
@@ -29,7 +30,10 @@ fn main() {
     let mu = env("MU", 0.9);
     let vt = env("VT", 15.0);
     let params = ParamSet::builtin("full_size").unwrap();
-    let mut settings = ControllerSettings::default();
+    let mut settings = match std::env::var("CTL_TOML") {
+        Ok(t) => ControllerSettings::from_toml_str(&t).unwrap(),
+        Err(_) => ControllerSettings::default(),
+    };
     settings.upper_layer = upper;
     let dt = settings.mpc.dt;
     let mut ctl = PitController::new(

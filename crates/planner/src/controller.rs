@@ -82,6 +82,8 @@ pub struct PitController {
     last_command: BulletInput,
     next_replan: f64,
     started: bool,
+    /// The target's heading when the PIT phase began (the frame of the push).
+    pit_frame: Option<f64>,
     clock: Box<dyn Clock + Send + Sync>,
 }
 
@@ -122,6 +124,7 @@ impl PitController {
             last_command: BulletInput::zeros(),
             next_replan: f64::NEG_INFINITY,
             started: false,
+            pit_frame: None,
             clock: Box::new(MonotonicClock::new()),
             settings,
         })
@@ -183,6 +186,7 @@ impl PitController {
     /// Start a new maneuver (phase chasing, no plan, MPC warm start dropped).
     pub fn reset(&mut self) {
         self.started = false;
+        self.pit_frame = None;
         self.next_replan = f64::NEG_INFINITY;
         self.last_command = BulletInput::zeros();
         self.mpc.reset();
@@ -221,6 +225,7 @@ impl PitController {
         }
         if !self.started {
             self.started = true;
+            self.pit_frame = None;
             self.phases.reset(input.time);
             let rel = crate::href::relative_position(&input.target, &input.bullet);
             let side = if rel.y >= 0.0 { Side::Left } else { Side::Right };
@@ -255,6 +260,9 @@ impl PitController {
         };
         let changed = self.phases.update(&obs);
         let phase = self.phases.phase();
+        if changed && phase == Phase::Pit {
+            self.pit_frame = Some(input.target[idx::PSI]);
+        }
         // The upper layer: replan on its period and on every phase change.
         let mut replanned = false;
         let mut plan_time = 0.0;
@@ -305,6 +313,7 @@ impl PitController {
                     &input.bullet,
                     input.time,
                     dt,
+                    self.pit_frame,
                 );
             } else {
                 self.default_pit.fill(

@@ -3,7 +3,7 @@
 use crate::package::{DecisionPackage, Mode};
 use crate::settings::PlannerSettings;
 use dynamics::bullet::BulletState;
-use dynamics::geometry::{Pose2, Vec2};
+use dynamics::geometry::{rotate, Pose2, Vec2};
 use dynamics::target::idx;
 use dynamics::TargetState;
 use mpc::{Reference, StageReference};
@@ -20,6 +20,9 @@ pub fn relative_position(xt: &TargetState, xb: &BulletState) -> Vec2 {
 /// * PIT: close in on the stand-off line beside the contact station so as to arrive
 ///   `turn_in` before the window, turn in to the contact pose (C_B), hold it over the
 ///   window T_c with the planned force corridor C_F, then fall back behind and outside.
+///   Over the window the contact pose is fixed in the target's frame at the start of the
+///   push (`pit_frame`, its heading then; `None` takes the plan's heading at the window's
+///   start).
 ///   The target objective tracks the planned heading at the end of the MPC's horizon
 ///   (the virtual rollout's prediction), so the MPC pushes as much as the plan needs.
 /// * Chase: close in to just behind the contact station, no force.
@@ -32,8 +35,10 @@ pub fn fill_reference(
     xb: &BulletState,
     time: f64,
     dt: f64,
+    pit_frame: Option<f64>,
 ) {
     let rel = relative_position(xt, xb);
+    let psi_now = xt[idx::PSI];
     let side = pkg.side.sign();
     let contact = StageReference {
         rel_pos: pkg.contact_rel_pos,
@@ -71,7 +76,18 @@ pub fn fill_reference(
                     let (lo, hi) = pkg
                         .step_at(tau.max(t0))
                         .map_or((0.0, 0.0), |p| p.corridor);
+                    // The contact pose is held in the target's frame as it was when the
+                    // push began (`pit_frame`): the bullet follows the target's c.g. but
+                    // not its rotation, so it keeps its heading and pushes on while the
+                    // rear quarter swings away, as a driver does in a PIT. Stage k refers
+                    // the pose to the target's heading predicted by the plan.
+                    let psi0 = pit_frame.unwrap_or_else(|| pkg.heading_at(t0).unwrap_or(psi_now));
+                    let psi_tau = psi_now + pkg.heading_at(tau).unwrap_or(0.0)
+                        - pkg.heading_at(time).unwrap_or(0.0);
+                    let rel_world = rotate(psi0, contact.rel_pos);
                     StageReference {
+                        rel_pos: rotate(-psi_tau, rel_world),
+                        rel_heading: psi0 + contact.rel_heading - psi_tau,
                         fn_lo: if tau >= t0 { lo } else { 0.0 },
                         fn_hi: hi,
                         ..contact
