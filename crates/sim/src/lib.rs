@@ -4,12 +4,16 @@
 //!   line and field, and the helpers that build the road, obstacles, the plant's initial
 //!   conditions and the target driver from a scenario.
 //! * [`outcome`]: the success test and the single first failure cause of an episode.
+//! * [`episode`]: the closed-loop episode runner (plant + controller + success test) and
+//!   its benchmark configurations.
 //! * [`screen`]: rule and short-simulation screening used by the dataset generator.
 
+pub mod episode;
 pub mod outcome;
 pub mod scenario;
 pub mod screen;
 
+pub use episode::{run_episode, ClockKind, EpisodeConfig, EpisodeError, EpisodeResult, ModelKind, Uncertainty};
 pub use outcome::{FailureCause, JudgeSettings, Metrics, Monitor, Observation, Outcome, Status};
 pub use scenario::{load_jsonl, parse_jsonl, Scenario, ScenarioError, TargetDriver};
 pub use screen::{screen, ScreenReport, ScreenSettings, Verdict};

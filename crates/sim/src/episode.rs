@@ -1,0 +1,819 @@
+//! The closed-loop episode runner: one scenario, one controller configuration, one seed.
+//!
+//! The plant ([`Plant`], 1 kHz) is the truth. The scenario gives the road, the obstacles,
+//! both initial states and the target driver; the hierarchical controller
+//! ([`PitController`]) runs every control period (the MPC's `dt`, 0.05 s) on what the
+//! sensors report and drives the bullet through [`Plant::set_bullet_command_blended`]. The
+//! success test ([`Monitor`]) sees the truth: it latches the plant after every plant step
+//! and observes once per control step. The episode stops as soon as the outcome is decided
+//! (or at `T_max`, which is a decision: no termination).
+//!
+//! Optional uncertainty ([`Uncertainty`]): Gaussian sensing noise on the states the
+//! controller sees, a sensing latency, and actuator gain and steer-bias errors drawn once
+//! per episode. All randomness comes from one RNG seeded by the episode seed
+//! ([`run_episode`]) or injected ([`run_episode_with_rng`]).
+//!
+//! Planning and control times are read from the controller's own clock: the wall clock by
+//! default, or a simulated tick clock ([`ClockKind::Simulated`]), with which an episode is
+//! bit-for-bit reproducible (the solvers' wall-clock limits are lifted in that mode).
+
+use crate::outcome::{FailureCause, Metrics, Monitor, Outcome, Status};
+use crate::scenario::{ParamSetName, Scenario, ScenarioError};
+use dynamics::params::ParamSet;
+use dynamics::plant::{Plant, PlantConfig};
+use dynamics::target4dof::FourDofTarget;
+use dynamics::{TargetInput, TargetModel, TargetState};
+use mpc::{MpcStatus, TickClock};
+use planner::{AbortReason, ControllerInput, ControllerSettings, Phase, PitController};
+use rand::{Rng, RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use thiserror::Error;
+
+/// Why an episode could not be run (bad configuration, scenario or model file). A
+/// controller or plant that merely performs badly is an outcome, never an error.
+#[derive(Debug, Error)]
+pub enum EpisodeError {
+    /// A configuration value or document that cannot be used; names the field.
+    #[error("episode config: `{field}`: {message}")]
+    Config { field: String, message: String },
+    #[error(transparent)]
+    Scenario(#[from] ScenarioError),
+    /// A target-model file that cannot be loaded (or does not cover the scenario's μ).
+    #[error("model {path}: {message}")]
+    Model { path: PathBuf, message: String },
+    /// The plant refused the parameter set.
+    #[error("plant: {0}")]
+    Plant(String),
+    /// The controller could not be built from the settings and the model.
+    #[error("controller: {0}")]
+    Controller(String),
+    /// The controller refused its input (a non-finite state, too many obstacles).
+    #[error("controller step at t = {time:.3} s: {message}")]
+    Step { time: f64, message: String },
+}
+
+fn config_err(field: &str, message: impl Into<String>) -> EpisodeError {
+    EpisodeError::Config {
+        field: field.to_owned(),
+        message: message.into(),
+    }
+}
+
+/// The controller's target surrogate.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ModelKind {
+    /// The 4-DOF analytic model (`dynamics::target4dof`).
+    #[serde(rename = "4dof")]
+    FourDof,
+    /// The teacher PINN (`models/<params>/pinn.safetensors`).
+    #[serde(rename = "pinn")]
+    Pinn,
+    /// PicoPINN (`models/<params>/picopinn.safetensors`).
+    #[serde(rename = "picopinn")]
+    PicoPinn,
+}
+
+impl ModelKind {
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::FourDof => "4dof",
+            Self::Pinn => "pinn",
+            Self::PicoPinn => "picopinn",
+        }
+    }
+
+    /// The model file of a learned surrogate under `models_dir`; `None` for the 4-DOF model.
+    #[must_use]
+    pub fn file(self, models_dir: &Path, params: ParamSetName) -> Option<PathBuf> {
+        let stem = match self {
+            Self::FourDof => return None,
+            Self::Pinn => "pinn",
+            Self::PicoPinn => "picopinn",
+        };
+        Some(models_dir.join(params.name()).join(format!("{stem}.safetensors")))
+    }
+}
+
+/// Which clock the controller measures its planning and control times (and the MPC its
+/// time budget) with.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ClockKind {
+    /// Wall-clock time (`std::time::Instant`): real runtimes; the MPC's time budget is real.
+    Wall,
+    /// A clock that advances by `clock_tick` per reading: times count readings, the episode
+    /// is reproducible bit for bit, and the solvers' own wall-clock limits are lifted.
+    Simulated,
+}
+
+/// Sensing noise, sensing latency and actuator uncertainty. All zero by default (a perfect
+/// vehicle interface). Noise is zero-mean Gaussian with the given standard deviations, drawn
+/// per control step and state component; actuator errors are uniform in `±value`, drawn once
+/// per episode.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct Uncertainty {
+    /// Position noise on X and Y of both vehicles (m).
+    pub position_std: f64,
+    /// Heading noise on ψ of both vehicles (rad).
+    pub heading_std: f64,
+    /// Velocity noise on vx and vy of both vehicles (m/s).
+    pub speed_std: f64,
+    /// Yaw-rate noise on r of both vehicles (and roll rate p of the target) (rad/s).
+    pub yaw_rate_std: f64,
+    /// Age of the state the controller sees (s), rounded to plant steps; ≤ 1 s.
+    pub latency: f64,
+    /// Relative steer gain error: applied δ = (1 + e) δ_cmd, e uniform in ±value (≤ 0.5).
+    pub steer_gain: f64,
+    /// Steer bias (rad): applied δ = … + b, b uniform in ±value (≤ 0.1).
+    pub steer_bias: f64,
+    /// Relative torque gain error: applied T_r = (1 + e) T_cmd, e uniform in ±value (≤ 0.5).
+    pub torque_gain: f64,
+}
+
+impl Uncertainty {
+    fn validate(&self) -> Result<(), EpisodeError> {
+        for (field, value, max) in [
+            ("uncertainty.position_std", self.position_std, 10.0),
+            ("uncertainty.heading_std", self.heading_std, 1.0),
+            ("uncertainty.speed_std", self.speed_std, 10.0),
+            ("uncertainty.yaw_rate_std", self.yaw_rate_std, 2.0),
+            ("uncertainty.latency", self.latency, 1.0),
+            ("uncertainty.steer_gain", self.steer_gain, 0.5),
+            ("uncertainty.steer_bias", self.steer_bias, 0.1),
+            ("uncertainty.torque_gain", self.torque_gain, 0.5),
+        ] {
+            if !(value.is_finite() && (0.0..=max).contains(&value)) {
+                return Err(config_err(field, format!("{value}: must lie in [0, {max}]")));
+            }
+        }
+        Ok(())
+    }
+
+    fn has_noise(&self) -> bool {
+        self.position_std > 0.0
+            || self.heading_std > 0.0
+            || self.speed_std > 0.0
+            || self.yaw_rate_std > 0.0
+    }
+}
+
+/// One benchmark configuration: the target surrogate, the controller settings (the upper
+/// layer on or off is `controller.upper_layer`), the uncertainty and the clock.
+///
+/// As JSON (serde, unknown fields refused) it may start from a preset:
+/// `{"preset": "picopinn", "uncertainty": {"latency": 0.02}}` takes the preset and
+/// overrides the fields given (objects are merged key by key).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct EpisodeConfig {
+    /// Name in reports (`4dof`, `pinn`, `picopinn`, `picopinn_no_upper`, …).
+    pub name: String,
+    /// The controller's target surrogate (planner and MPC alike).
+    pub model: ModelKind,
+    /// Folder of the model files: `<models_dir>/<params>/{pinn,picopinn}.safetensors`.
+    pub models_dir: PathBuf,
+    /// A model file to use instead (for every parameter set).
+    pub model_path: Option<PathBuf>,
+    pub controller: ControllerSettings,
+    pub uncertainty: Uncertainty,
+    pub clock: ClockKind,
+    /// Seconds per reading of the simulated clock.
+    pub clock_tick: f64,
+    /// Keep the trajectory (one sample per control step) in the result.
+    pub record: bool,
+}
+
+impl Default for EpisodeConfig {
+    fn default() -> Self {
+        Self {
+            name: "picopinn".to_owned(),
+            model: ModelKind::PicoPinn,
+            models_dir: PathBuf::from("models"),
+            model_path: None,
+            controller: ControllerSettings::default(),
+            uncertainty: Uncertainty::default(),
+            clock: ClockKind::Wall,
+            clock_tick: 1.0e-5,
+            record: false,
+        }
+    }
+}
+
+impl EpisodeConfig {
+    /// The benchmark's configurations: the three surrogates with the upper layer, and
+    /// PicoPINN without it (the planning-structure ablation).
+    pub const PRESETS: [&'static str; 4] = ["4dof", "pinn", "picopinn", "picopinn_no_upper"];
+
+    /// A preset by name.
+    ///
+    /// # Errors
+    /// [`EpisodeError::Config`] (field `preset`) for an unknown name, listing the known ones.
+    pub fn preset(name: &str) -> Result<Self, EpisodeError> {
+        let (model, upper) = match name {
+            "4dof" => (ModelKind::FourDof, true),
+            "pinn" => (ModelKind::Pinn, true),
+            "picopinn" => (ModelKind::PicoPinn, true),
+            "picopinn_no_upper" => (ModelKind::PicoPinn, false),
+            _ => {
+                return Err(config_err(
+                    "preset",
+                    format!(
+                        "unknown configuration {name:?}; known: {}",
+                        Self::PRESETS.join(", ")
+                    ),
+                ))
+            }
+        };
+        let mut c = Self {
+            name: name.to_owned(),
+            model,
+            ..Self::default()
+        };
+        c.controller.upper_layer = upper;
+        Ok(c)
+    }
+
+    /// A preset name, or a JSON object (see [`EpisodeConfig`]); validated.
+    ///
+    /// # Errors
+    /// [`EpisodeError::Config`] naming the field at fault.
+    pub fn parse(text: &str) -> Result<Self, EpisodeError> {
+        let t = text.trim();
+        if t.starts_with('{') {
+            Self::from_json(t)
+        } else {
+            let c = Self::preset(t)?;
+            c.validate()?;
+            Ok(c)
+        }
+    }
+
+    /// Parse and validate a JSON configuration.
+    ///
+    /// # Errors
+    /// [`EpisodeError::Config`] naming the field (e.g. `uncertainty.latency`) at fault.
+    pub fn from_json(text: &str) -> Result<Self, EpisodeError> {
+        let mut value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| config_err("(document)", e.to_string()))?;
+        let obj = value
+            .as_object_mut()
+            .ok_or_else(|| config_err("(document)", "expected a JSON object"))?;
+        if let Some(p) = obj.remove("preset") {
+            let name = p
+                .as_str()
+                .ok_or_else(|| config_err("preset", format!("{p}: expected a string")))?;
+            let mut base = serde_json::to_value(Self::preset(name)?)
+                .map_err(|e| config_err("preset", e.to_string()))?;
+            merge(&mut base, serde_json::Value::Object(std::mem::take(obj)));
+            value = base;
+        }
+        let c: Self = serde_path_to_error::deserialize(value).map_err(|e| {
+            let path = e.path().to_string();
+            config_err(&path, e.into_inner().to_string())
+        })?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// # Errors
+    /// [`EpisodeError::Config`] naming the first bad field.
+    pub fn validate(&self) -> Result<(), EpisodeError> {
+        if self.name.is_empty() || self.name.len() > 64 {
+            return Err(config_err("name", "must have 1 to 64 characters"));
+        }
+        if !(self.clock_tick.is_finite() && self.clock_tick > 0.0 && self.clock_tick <= 1.0) {
+            return Err(config_err(
+                "clock_tick",
+                format!("{}: must lie in (0, 1] s", self.clock_tick),
+            ));
+        }
+        self.uncertainty.validate()?;
+        self.controller
+            .validate()
+            .map_err(|e| config_err("controller", e.to_string()))
+    }
+}
+
+/// Merge `over` into `base`: objects key by key (recursively), anything else replaced.
+fn merge(base: &mut serde_json::Value, over: serde_json::Value) {
+    match (base, over) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+            for (k, v) in o {
+                match b.get_mut(&k) {
+                    Some(slot) => merge(slot, v),
+                    None => {
+                        b.insert(k, v);
+                    }
+                }
+            }
+        }
+        (b, o) => *b = o,
+    }
+}
+
+/// Median, 99th percentile and maximum of a set of times (ms); NaN when empty. Percentiles
+/// interpolate linearly between order statistics (numpy's default).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+pub struct TimeStats {
+    pub count: usize,
+    pub median_ms: f64,
+    pub p99_ms: f64,
+    pub max_ms: f64,
+}
+
+impl TimeStats {
+    /// Statistics of `times_ms` (sorted in place).
+    #[must_use]
+    pub fn of(times_ms: &mut [f64]) -> Self {
+        times_ms.sort_by(f64::total_cmp);
+        Self {
+            count: times_ms.len(),
+            median_ms: percentile(times_ms, 50.0),
+            p99_ms: percentile(times_ms, 99.0),
+            max_ms: times_ms.last().copied().unwrap_or(f64::NAN),
+        }
+    }
+}
+
+/// Percentile `q` (0–100) of sorted values, linear interpolation; NaN when empty.
+#[must_use]
+pub fn percentile(sorted: &[f64], q: f64) -> f64 {
+    match sorted.len() {
+        0 => f64::NAN,
+        1 => sorted[0],
+        n => {
+            let pos = (q / 100.0).clamp(0.0, 1.0) * (n - 1) as f64;
+            let lo = pos.floor() as usize;
+            let hi = (lo + 1).min(n - 1);
+            let w = pos - lo as f64;
+            sorted[lo] * (1.0 - w) + sorted[hi] * w
+        }
+    }
+}
+
+/// One control step of a recorded episode (the truth after the step's plant steps, and
+/// what was commanded during it).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Time at the end of the step (s).
+    pub time: f64,
+    /// Target `[vx, vy, ψ, r, p, φ, X, Y]`.
+    pub target: [f64; 8],
+    /// Bullet `[X, Y, ψ, vx, vy, r]`.
+    pub bullet: [f64; 6],
+    /// The controller's command `[δ_f, T_r]` over the step.
+    pub command: [f64; 2],
+    /// The target driver's command `[δ, T_b]` over the step.
+    pub target_command: [f64; 2],
+    /// Contact force `[F_n, F_t]` averaged over the step (N; zero apart).
+    pub contact_force: [f64; 2],
+    pub phase: Phase,
+    pub replanned: bool,
+    /// Planning and control times of the step (ms).
+    pub plan_ms: f64,
+    pub ctrl_ms: f64,
+}
+
+impl Sample {
+    /// Column names of [`Sample::row`].
+    pub const COLUMNS: [&'static str; 26] = [
+        "time", "target_vx", "target_vy", "target_psi", "target_r", "target_p", "target_phi",
+        "target_x", "target_y", "bullet_x", "bullet_y", "bullet_psi", "bullet_vx", "bullet_vy",
+        "bullet_r", "cmd_steer", "cmd_torque", "target_steer", "target_brake", "contact_fn",
+        "contact_ft", "phase", "replanned", "plan_ms", "ctrl_ms", "decided",
+    ];
+
+    /// The sample as numbers in [`Sample::COLUMNS`] order (phase as its index: chasing 0,
+    /// PIT 1, stabilising 2, done 3, aborted 4; `decided` is filled by the caller).
+    #[must_use]
+    pub fn row(&self, decided: bool) -> [f64; 26] {
+        let mut r = [0.0; 26];
+        r[0] = self.time;
+        r[1..9].copy_from_slice(&self.target);
+        r[9..15].copy_from_slice(&self.bullet);
+        r[15..17].copy_from_slice(&self.command);
+        r[17..19].copy_from_slice(&self.target_command);
+        r[19..21].copy_from_slice(&self.contact_force);
+        r[21] = phase_index(self.phase);
+        r[22] = f64::from(u8::from(self.replanned));
+        r[23] = self.plan_ms;
+        r[24] = self.ctrl_ms;
+        r[25] = f64::from(u8::from(decided));
+        r
+    }
+}
+
+/// Index of a phase in recorded trajectories.
+#[must_use]
+pub fn phase_index(p: Phase) -> f64 {
+    match p {
+        Phase::Chasing => 0.0,
+        Phase::Pit => 1.0,
+        Phase::Stabilising => 2.0,
+        Phase::Done => 3.0,
+        Phase::Aborted => 4.0,
+    }
+}
+
+/// Everything one episode produced.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct EpisodeResult {
+    pub scenario: String,
+    pub config: String,
+    pub seed: u64,
+    /// The target model's name and trainable-parameter count (0 for the 4-DOF model).
+    pub model: String,
+    pub param_count: usize,
+    pub upper_layer: bool,
+    /// The success test's metrics (success, first cause, heading error, margins, contacts).
+    pub metrics: Metrics,
+    /// Simulated time at the end (s).
+    pub sim_time: f64,
+    pub control_steps: u64,
+    /// Planning times over the steps that planned; control times over the steps the MPC
+    /// ran (the safe stop after the maneuver is excluded).
+    pub plan: TimeStats,
+    pub ctrl: TimeStats,
+    /// The controller's phase at the end, and its abort reason if it aborted.
+    pub final_phase: Phase,
+    pub abort: Option<String>,
+    /// MPC steps that returned the safe fallback / ran out of their time budget.
+    pub mpc_failures: u32,
+    pub mpc_time_budget: u32,
+    /// Wall-clock time of the whole episode (s): not deterministic.
+    pub wall_time: f64,
+    /// Every plan and control time (ms), for pooled statistics.
+    pub plan_times_ms: Vec<f64>,
+    pub ctrl_times_ms: Vec<f64>,
+    /// One sample per control step when recording.
+    pub trajectory: Vec<Sample>,
+}
+
+impl EpisodeResult {
+    #[must_use]
+    pub fn success(&self) -> bool {
+        self.metrics.success
+    }
+
+    #[must_use]
+    pub fn cause(&self) -> Option<FailureCause> {
+        self.metrics.cause
+    }
+}
+
+/// Run one episode with the RNG seeded by `seed`.
+///
+/// # Errors
+/// [`EpisodeError`] for a configuration, scenario or model file that cannot be used.
+pub fn run_episode(
+    scenario: &Scenario,
+    config: &EpisodeConfig,
+    seed: u64,
+) -> Result<EpisodeResult, EpisodeError> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut r = run_episode_with_rng(scenario, config, &mut rng)?;
+    r.seed = seed;
+    Ok(r)
+}
+
+/// A standard normal draw (Box–Muller; two uniforms per draw, for a simple fixed order).
+fn gauss<R: RngCore + ?Sized>(rng: &mut R) -> f64 {
+    let u1: f64 = 1.0 - rng.random::<f64>();
+    let u2: f64 = rng.random::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+fn uniform_pm<R: RngCore + ?Sized>(rng: &mut R, half: f64) -> f64 {
+    if half > 0.0 {
+        half * (2.0 * rng.random::<f64>() - 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// Load one target model for the controller.
+fn load_model(
+    config: &EpisodeConfig,
+    sc: &Scenario,
+    params: &ParamSet,
+    dt: f64,
+) -> Result<Box<dyn TargetModel + Send + Sync>, EpisodeError> {
+    let path = match (&config.model_path, config.model.file(&config.models_dir, sc.params)) {
+        (_, None) => return Ok(Box::new(FourDofTarget::new(&params.target, sc.mu, dt))),
+        (Some(p), Some(_)) => p.clone(),
+        (None, Some(p)) => p,
+    };
+    pico_nn::SurrogateModel::from_path(&path)
+        .and_then(|m| m.with_mu(sc.mu))
+        .map(|m| Box::new(m) as Box<dyn TargetModel + Send + Sync>)
+        .map_err(|e| EpisodeError::Model {
+            path,
+            message: e.to_string(),
+        })
+}
+
+/// What the sensors report: the true states delayed by the latency, plus noise.
+struct Sensor {
+    buf: VecDeque<(TargetState, [f64; 6])>,
+    delay_steps: usize,
+}
+
+impl Sensor {
+    fn new(delay_steps: usize, target: TargetState, bullet: [f64; 6]) -> Self {
+        let mut buf = VecDeque::with_capacity(delay_steps + 2);
+        buf.push_back((target, bullet));
+        Self { buf, delay_steps }
+    }
+
+    fn push(&mut self, target: TargetState, bullet: [f64; 6]) {
+        self.buf.push_back((target, bullet));
+        while self.buf.len() > self.delay_steps + 1 {
+            self.buf.pop_front();
+        }
+    }
+
+    /// The delayed states (the oldest kept sample).
+    fn read(&self) -> (TargetState, [f64; 6]) {
+        self.buf.front().copied().unwrap_or_else(|| {
+            unreachable!("the sensor buffer always holds the initial sample")
+        })
+    }
+}
+
+fn add_noise<R: RngCore + ?Sized>(
+    u: &Uncertainty,
+    rng: &mut R,
+    xt: &mut TargetState,
+    xb: &mut [f64; 6],
+) {
+    // Fixed draw order: target vx vy ψ r p X Y, bullet X Y ψ vx vy r.
+    let mut draw = |std: f64| std * gauss(rng);
+    xt[0] += draw(u.speed_std);
+    xt[1] += draw(u.speed_std);
+    xt[2] += draw(u.heading_std);
+    xt[3] += draw(u.yaw_rate_std);
+    xt[4] += draw(u.yaw_rate_std);
+    xt[6] += draw(u.position_std);
+    xt[7] += draw(u.position_std);
+    xb[0] += draw(u.position_std);
+    xb[1] += draw(u.position_std);
+    xb[2] += draw(u.heading_std);
+    xb[3] += draw(u.speed_std);
+    xb[4] += draw(u.speed_std);
+    xb[5] += draw(u.yaw_rate_std);
+}
+
+/// Run one episode drawing all randomness (sensing noise, actuator errors) from `rng`.
+///
+/// # Errors
+/// As [`run_episode`]. The result's `seed` is 0 (the caller knows how `rng` was seeded).
+#[allow(clippy::too_many_lines)]
+pub fn run_episode_with_rng<R: RngCore + ?Sized>(
+    scenario: &Scenario,
+    config: &EpisodeConfig,
+    rng: &mut R,
+) -> Result<EpisodeResult, EpisodeError> {
+    let wall0 = Instant::now();
+    config.validate()?;
+    let sc = scenario;
+    let params = sc.params.load()?;
+    let road = sc.build_road()?;
+    let obstacles = sc.obstacles();
+    let mut settings = config.controller.clone();
+    if config.clock == ClockKind::Simulated {
+        // The solvers' own wall-clock limits would make the episode machine-dependent.
+        settings.mpc.qp.time_limit = 1.0e6;
+        settings.planner.qp.time_limit = 1.0e6;
+    }
+    let dt = settings.mpc.dt;
+    let mpc_model = load_model(config, sc, &params, dt)?;
+    let planner_model = load_model(config, sc, &params, dt)?;
+    let mut ctl = PitController::new(&params, sc.mu, mpc_model, planner_model, settings)
+        .map_err(|e| EpisodeError::Controller(e.to_string()))?;
+    if config.clock == ClockKind::Simulated {
+        ctl = ctl.with_clock(
+            Box::new(TickClock::new(config.clock_tick)),
+            Box::new(TickClock::new(config.clock_tick)),
+        );
+    }
+    let model = ctl.target_model_name().to_owned();
+    let param_count = ctl.target_param_count();
+
+    let mut plant = Plant::new(
+        &params,
+        PlantConfig {
+            mu: sc.mu,
+            ..PlantConfig::default()
+        },
+    )
+    .map_err(|e| EpisodeError::Plant(e.to_string()))?;
+    plant.set_obstacles(obstacles.clone());
+    let (bi, ti) = sc.initial_states(&road);
+    plant.reset(&bi, &ti);
+    let mut driver = sc.target_driver(&params);
+    let mut monitor = Monitor::for_scenario(sc)?;
+
+    let plant_dt = plant.dt();
+    let steps_per = (dt / plant_dt).round().max(1.0) as usize;
+    let n_steps = (sc.t_max / dt).ceil() as u64 + 1;
+    let u = config.uncertainty;
+    let delay_steps = (u.latency / plant_dt).round() as usize;
+    let mut sensor = Sensor::new(delay_steps, plant.target_state(), bullet_array(&plant));
+    // Actuator errors, drawn once (fixed order: steer gain, steer bias, torque gain).
+    let steer_gain = 1.0 + uniform_pm(rng, u.steer_gain);
+    let steer_bias = uniform_pm(rng, u.steer_bias);
+    let torque_gain = 1.0 + uniform_pm(rng, u.torque_gain);
+    let noisy = u.has_noise();
+
+    let mut first_contact: Option<f64> = None;
+    let mut plan_times = Vec::new();
+    let mut ctrl_times = Vec::with_capacity(n_steps as usize);
+    let mut trajectory = Vec::new();
+    let mut stabilising_reported = false;
+    let (mut mpc_failures, mut mpc_time_budget) = (0u32, 0u32);
+    let mut phase = ctl.phase();
+    let mut steps = 0u64;
+    let mut status = Status::Running;
+
+    while steps < n_steps {
+        let t = plant.time();
+        let truth_target = plant.target_state();
+        let (mut xt, mut xb) = sensor.read();
+        if noisy {
+            add_noise(&u, rng, &mut xt, &mut xb);
+        }
+        let (t_steer, t_brake) = driver.command(t, first_contact, &truth_target, &road);
+        plant.set_target_command(t_steer, t_brake);
+        let prev_phase = phase;
+        let out = ctl
+            .step(&ControllerInput {
+                time: t,
+                target: xt,
+                bullet: xb.into(),
+                target_input: TargetInput::new(t_steer, t_brake),
+                road: &road,
+                obstacles: &obstacles,
+            })
+            .map_err(|e| EpisodeError::Step {
+                time: t,
+                message: e.to_string(),
+            })?;
+        phase = out.phase;
+        steps += 1;
+        if out.replanned {
+            plan_times.push(out.plan_time * 1e3);
+        }
+        if let Some(st) = out.mpc_status {
+            ctrl_times.push(out.ctrl_time * 1e3);
+            match st {
+                MpcStatus::QpFailure => mpc_failures += 1,
+                MpcStatus::TimeBudget => mpc_time_budget += 1,
+                _ => {}
+            }
+        }
+        if phase == Phase::Stabilising && !stabilising_reported {
+            stabilising_reported = true;
+            monitor.enter_stabilisation(t);
+        }
+        if prev_phase == Phase::Chasing
+            && matches!(out.abort, Some(AbortReason::DecisionInfeasible(_)))
+        {
+            status = monitor.decision_infeasible(t);
+        }
+        if let Status::Done(_) = status {
+            if config.record {
+                trajectory.push(sample(&plant, &out, [t_steer, t_brake], [0.0; 2], t));
+            }
+            break;
+        }
+        let cmd = out.command;
+        plant.set_bullet_command_blended(steer_gain * cmd[0] + steer_bias, torque_gain * cmd[1]);
+        for _ in 0..steps_per {
+            plant.step();
+            monitor.latch(&plant);
+            if first_contact.is_none() && plant.contact().is_some() {
+                first_contact = Some(plant.time());
+            }
+            if delay_steps > 0 {
+                sensor.push(plant.target_state(), bullet_array(&plant));
+            }
+        }
+        if delay_steps == 0 {
+            sensor.push(plant.target_state(), bullet_array(&plant));
+        }
+        let fc = plant
+            .take_contact_average()
+            .map_or([0.0; 2], |c| [c.fc.x, c.fc.y]);
+        status = monitor.observe_plant(&plant);
+        if config.record {
+            trajectory.push(sample(&plant, &out, [t_steer, t_brake], fc, plant.time()));
+        }
+        if let Status::Done(_) = status {
+            break;
+        }
+    }
+    debug_assert!(
+        matches!(status, Status::Done(_)),
+        "the monitor decides no termination at T_max"
+    );
+    let metrics = monitor.metrics();
+    let plan = TimeStats::of(&mut plan_times.clone());
+    let ctrl = TimeStats::of(&mut ctrl_times.clone());
+    Ok(EpisodeResult {
+        scenario: sc.id.clone(),
+        config: config.name.clone(),
+        seed: 0,
+        model,
+        param_count,
+        upper_layer: ctl.settings().upper_layer,
+        metrics,
+        sim_time: plant.time(),
+        control_steps: steps,
+        plan,
+        ctrl,
+        final_phase: ctl.phase(),
+        abort: ctl.abort_reason().map(|a| format!("{a:?}")),
+        mpc_failures,
+        mpc_time_budget,
+        wall_time: wall0.elapsed().as_secs_f64(),
+        plan_times_ms: plan_times,
+        ctrl_times_ms: ctrl_times,
+        trajectory,
+    })
+}
+
+fn bullet_array(plant: &Plant) -> [f64; 6] {
+    let b = plant.bullet_state();
+    [b[0], b[1], b[2], b[3], b[4], b[5]]
+}
+
+fn sample(
+    plant: &Plant,
+    out: &planner::ControllerOutput,
+    target_command: [f64; 2],
+    contact_force: [f64; 2],
+    time: f64,
+) -> Sample {
+    let xt = plant.target_state();
+    let mut target = [0.0; 8];
+    target.copy_from_slice(xt.as_slice());
+    Sample {
+        time,
+        target,
+        bullet: bullet_array(plant),
+        command: [out.command[0], out.command[1]],
+        target_command,
+        contact_force,
+        phase: out.phase,
+        replanned: out.replanned,
+        plan_ms: out.plan_time * 1e3,
+        ctrl_ms: out.ctrl_time * 1e3,
+    }
+}
+
+/// The outcome's name for reports: `success`, a failure cause's name, or `running`.
+#[must_use]
+pub fn outcome_name(o: Option<Outcome>) -> &'static str {
+    match o {
+        Some(Outcome::Success { .. }) => "success",
+        Some(Outcome::Failure { cause, .. }) => cause.name(),
+        None => "running",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_interpolate_like_numpy() {
+        let v: Vec<f64> = (1..=10).map(f64::from).collect();
+        assert!((percentile(&v, 50.0) - 5.5).abs() < 1e-12);
+        assert!((percentile(&v, 99.0) - 9.91).abs() < 1e-12);
+        assert!(percentile(&[], 50.0).is_nan());
+        let s = TimeStats::of(&mut [3.0, 1.0, 2.0]);
+        assert_eq!((s.count, s.median_ms, s.max_ms), (3, 2.0, 3.0));
+    }
+
+    #[test]
+    fn the_sensor_reports_the_state_of_delay_steps_ago() {
+        let x = |v: f64| (TargetState::from_element(v), [v; 6]);
+        let (t0, b0) = x(0.0);
+        let mut s = Sensor::new(3, t0, b0);
+        for k in 1..=10 {
+            let (t, b) = x(f64::from(k));
+            s.push(t, b);
+            assert_eq!(s.read().1[0], f64::from((k - 3).max(0)), "after {k} pushes");
+        }
+        let mut s = Sensor::new(0, t0, b0);
+        let (t, b) = x(5.0);
+        s.push(t, b);
+        assert_eq!(s.read().0[0], 5.0);
+    }
+}

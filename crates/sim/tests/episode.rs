@@ -1,0 +1,165 @@
+//! The closed-loop episode runner: decided outcomes, stopping at the decision,
+//! determinism on the simulated clock, uncertainty, and configuration errors that name
+//! the field. Debug builds run the QPs ~20x slower: the episodes here are short.
+
+use sim::episode::{run_episode, ClockKind, EpisodeConfig, EpisodeError, ModelKind};
+use sim::{FailureCause, Scenario};
+use std::path::PathBuf;
+
+fn models_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models")
+}
+
+/// A straight three-lane road; the target in the left lane at 15 m/s, the bullet one lane
+/// to its right, 12 m behind and 2 m/s faster.
+fn scenario(driver: &str, t_max: f64) -> Scenario {
+    let text = format!(
+        r#"{{"id":"scripted","category":"straight_urban","params":"full_size","prior":"test","seed":1,
+        "road":{{"lanes":3,"lane_width":3.5,"shoulder":1.0,"length":800.0,"entry":0.0,"transition":0.0}},
+        "mu":0.9,"adhesion":"high","obstacles":[],
+        "target":{{"s":100.0,"d":3.5,"heading":0.0,"vx":15.0,"vy":0.0,"r":0.0}},
+        "bullet":{{"s":88.0,"d":0.0,"heading":0.0,"vx":17.0,"vy":0.0,"r":0.0}},
+        "driver":{driver},"t_max":{t_max},"eps_psi":0.349066}}"#
+    )
+    .replace('\n', " ");
+    Scenario::from_json_line(&text, 1).expect("valid scenario")
+}
+
+fn config(preset: &str) -> EpisodeConfig {
+    let mut c = EpisodeConfig::preset(preset).unwrap();
+    c.models_dir = models_dir();
+    c.clock = ClockKind::Simulated;
+    c
+}
+
+#[test]
+fn a_target_steered_off_the_road_is_a_boundary_violation_and_the_episode_stops_there() {
+    // The driver holds 0.3 rad of left steer: the target leaves the road within ~1 s.
+    let sc = scenario(r#"{"kind":"none","steer":0.3}"#, 6.0);
+    let mut cfg = config("4dof");
+    cfg.record = true;
+    let r = run_episode(&sc, &cfg, 7).unwrap();
+    assert!(!r.success());
+    assert_eq!(r.cause(), Some(FailureCause::BoundaryViolation), "{r:?}");
+    assert!(r.metrics.boundary_violation);
+    assert!(r.metrics.min_margin < 0.0);
+    let t = r.metrics.decided_at.unwrap();
+    assert!(t < 3.0, "decided at {t}");
+    // Stopped at the decision, not at T_max.
+    assert!((r.sim_time - t).abs() < 1e-9, "sim {} decided {t}", r.sim_time);
+    assert_eq!(r.trajectory.len() as u64, r.control_steps);
+    assert!((r.trajectory.last().unwrap().time - t).abs() < 1e-9);
+    assert_eq!(r.model, "4dof");
+    assert_eq!(r.param_count, 0);
+    assert_eq!(r.seed, 7);
+}
+
+#[test]
+fn an_episode_without_a_decision_ends_at_t_max_as_no_termination() {
+    // Lane keeping target, 1 s: nothing can be decided that quickly but T_max.
+    let sc = scenario(r#"{"kind":"lane_keep","offset":3.5,"gain":1.0}"#, 1.0);
+    let r = run_episode(&sc, &config("4dof"), 0).unwrap();
+    match r.cause() {
+        Some(FailureCause::NoTermination) => {
+            assert!((r.metrics.decided_at.unwrap() - 1.0).abs() < 1e-6);
+        }
+        // The upper layer may legitimately refuse while chasing.
+        Some(FailureCause::DecisionInfeasible) => assert!(r.abort.is_some()),
+        other => panic!("unexpected outcome {other:?}: {r:?}"),
+    }
+    assert!(r.sim_time <= 1.0 + 1e-9);
+    assert!(r.ctrl.count > 0 && r.ctrl.median_ms > 0.0);
+    assert!(r.trajectory.is_empty(), "not recorded unless asked");
+}
+
+#[test]
+fn the_same_seed_on_the_simulated_clock_gives_the_same_episode() {
+    let sc = scenario(r#"{"kind":"lane_keep","offset":3.5,"gain":1.0}"#, 1.5);
+    let mut cfg = config("picopinn");
+    cfg.record = true;
+    cfg.uncertainty.position_std = 0.05;
+    cfg.uncertainty.heading_std = 0.01;
+    cfg.uncertainty.speed_std = 0.1;
+    cfg.uncertainty.yaw_rate_std = 0.01;
+    cfg.uncertainty.latency = 0.02;
+    cfg.uncertainty.steer_gain = 0.1;
+    cfg.uncertainty.torque_gain = 0.1;
+    let strip = |mut r: sim::EpisodeResult| {
+        r.wall_time = 0.0;
+        r
+    };
+    let a = strip(run_episode(&sc, &cfg, 42).unwrap());
+    let b = strip(run_episode(&sc, &cfg, 42).unwrap());
+    assert_eq!(a, b);
+    assert!(a.param_count > 0, "PicoPINN has free parameters");
+    // Another seed draws other noise: the commands differ.
+    let c = strip(run_episode(&sc, &cfg, 43).unwrap());
+    let cmds = |r: &sim::EpisodeResult| r.trajectory.iter().map(|s| s.command).collect::<Vec<_>>();
+    assert_ne!(cmds(&a), cmds(&c));
+    // And without uncertainty the seed does not matter.
+    let mut clean = cfg.clone();
+    clean.uncertainty = Default::default();
+    let d = strip(run_episode(&sc, &clean, 1).unwrap());
+    let e = strip(run_episode(&sc, &clean, 2).unwrap());
+    assert_eq!(cmds(&d), cmds(&e));
+    assert_ne!(cmds(&a), cmds(&d));
+}
+
+fn config_error(text: &str) -> (String, String) {
+    match EpisodeConfig::parse(text) {
+        Err(EpisodeError::Config { field, message }) => (field, message),
+        other => panic!("{text}: expected a config error, got {other:?}"),
+    }
+}
+
+#[test]
+fn configuration_errors_name_the_field() {
+    assert_eq!(config_error(r#"{"model": "5dof"}"#).0, "model");
+    assert_eq!(config_error(r#"{"uncertainty": {"latency": "long"}}"#).0, "uncertainty.latency");
+    assert_eq!(config_error(r#"{"uncertainty": {"latency": 5.0}}"#).0, "uncertainty.latency");
+    assert_eq!(config_error(r#"{"uncertainty": {"noise": 1.0}}"#).0, "uncertainty.noise");
+    let (field, message) = config_error(r#"{"modle": "pinn"}"#);
+    assert_eq!(field, "modle");
+    assert!(message.contains("unknown field"), "{message}");
+    assert_eq!(config_error(r#"{"clock": "sundial"}"#).0, "clock");
+    assert_eq!(config_error(r#"{"clock_tick": 0.0}"#).0, "clock_tick");
+    let (field, message) = config_error(r#"{"preset": "picopinn", "controller": {"mpc": {"dt": -1.0}}}"#);
+    assert_eq!(field, "controller");
+    assert!(message.contains("dt"), "{message}");
+    let (field, message) = config_error("picopinn_upper");
+    assert_eq!(field, "preset");
+    assert!(message.contains("picopinn_no_upper"), "lists the known names: {message}");
+    assert_eq!(config_error(r#"{"preset": 3}"#).0, "preset");
+    assert_eq!(config_error("{not json").0, "(document)");
+}
+
+#[test]
+fn presets_and_overrides() {
+    for name in EpisodeConfig::PRESETS {
+        let c = EpisodeConfig::parse(name).unwrap();
+        assert_eq!(c.name, name);
+        assert_eq!(c.controller.upper_layer, name != "picopinn_no_upper");
+    }
+    assert_eq!(EpisodeConfig::parse("4dof").unwrap().model, ModelKind::FourDof);
+    let c = EpisodeConfig::parse(
+        r#"{"preset": "picopinn_no_upper", "name": "noisy", "uncertainty": {"latency": 0.05}}"#,
+    )
+    .unwrap();
+    assert_eq!(c.name, "noisy");
+    assert!(!c.controller.upper_layer, "the preset's controller settings survive the merge");
+    assert_eq!(c.uncertainty.latency, 0.05);
+    assert_eq!(c.model, ModelKind::PicoPinn);
+}
+
+#[test]
+fn a_missing_model_file_is_an_error_naming_it() {
+    let sc = scenario(r#"{"kind":"lane_keep","offset":3.5,"gain":1.0}"#, 1.0);
+    let mut cfg = config("pinn");
+    cfg.models_dir = PathBuf::from("/nonexistent/models");
+    match run_episode(&sc, &cfg, 0) {
+        Err(EpisodeError::Model { path, .. }) => {
+            assert!(path.ends_with("full_size/pinn.safetensors"), "{}", path.display());
+        }
+        other => panic!("expected a model error, got {other:?}"),
+    }
+}
