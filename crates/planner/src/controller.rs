@@ -286,6 +286,8 @@ impl PitController {
                 let reason = pkg.infeasible.unwrap_or(crate::Infeasible::Numerical);
                 self.phases
                     .abort(AbortReason::DecisionInfeasible(reason), input.time);
+            } else if pkg.mode == Mode::Stabilise {
+                self.phases.stabilise(input.time);
             }
             let period = if phase == Phase::Pit {
                 self.settings.planner.replan_period_pit

@@ -358,6 +358,27 @@ impl Planner {
             .road
             .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
             .heading;
+        // The target reverses without further push (a PIT under way that has done its
+        // work, or a target spinning out by itself): the decision is to stop pushing.
+        {
+            let side = input.side.unwrap_or_else(|| self.bullet_side(input));
+            self.setup_candidate(side, self.n, lane);
+            self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
+            self.rollout(&input.target, false, false);
+            self.linearise_rows(input.road, input.obstacles);
+            let (_, heading_error, road_margin, clearance, stop_margin) = self.merit(false);
+            let tol = self.settings.violation_tol;
+            if heading_error <= self.settings.heading_tol
+                && road_margin >= -tol
+                && stop_margin >= -tol
+                && clearance >= self.settings.obstacle_clearance - tol
+            {
+                self.package.candidates = 0;
+                self.package.feasible_candidates = 0;
+                self.fill_package(Mode::Stabilise, None, None, lane, input);
+                return Ok(&self.package);
+            }
+        }
         let mut best: Option<Outcome> = None;
         let mut best_any: Option<Outcome> = None;
         let mut candidates = 0u32;

@@ -126,6 +126,14 @@ impl PhaseMachine {
         }
     }
 
+    /// End the push now, from an active phase: the upper layer predicts the target
+    /// reverses without it.
+    pub fn stabilise(&mut self, time: f64) {
+        if self.phase.is_active() {
+            self.enter(Phase::Stabilising, time);
+        }
+    }
+
     /// Advance on an observation; returns whether the phase changed.
     pub fn update(&mut self, o: &PhaseObservation) -> bool {
         let s = &self.settings;
@@ -147,6 +155,10 @@ impl PhaseMachine {
             }
         }
         match self.phase {
+            Phase::Chasing | Phase::Pit if o.mode == Some(Mode::Stabilise) => {
+                // The upper layer predicts the target reverses without further push.
+                self.enter(Phase::Stabilising, o.time);
+            }
             Phase::Chasing => {
                 if o.mode == Some(Mode::Abort) {
                     let reason = o.infeasible.unwrap_or(Infeasible::TerminalSetUnreachable);
