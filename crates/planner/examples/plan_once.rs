@@ -41,6 +41,7 @@ fn main() {
     }
     let pkg = p.package().clone();
     times.sort_by(f64::total_cmp);
+    println!("{p:?}");
     println!("plan: median {:.2} ms, min {:.2} ms (20 runs)", times[200], times[0]);
     println!(
         "mode {:?} {:?} side {:?} window {:?} cands {}/{} obj {:.3} head_err {:.3} road {:.2} clear {:.2} stop {:.2}",

@@ -331,11 +331,7 @@ impl Planner {
                 - 0.5;
             dx = (rel.x - behind).max(0.0) + (c.rel_pos.x - behind).abs();
         }
-        let t = s.settle_time + (dx / s.approach_speed).max(dy / s.lateral_speed);
-        if std::env::var("PLAN_DEBUG").is_ok() {
-            eprintln!("side {side:?} rel {rel:?} contact {:?} dx {dx} dy {dy} t_arr {t}", c.rel_pos);
-        }
-        t
+        s.settle_time + (dx / s.approach_speed).max(dy / s.lateral_speed)
     }
 
     /// Plan from the current state: search the candidates and fill the package.
@@ -411,14 +407,6 @@ impl Planner {
                 let Some(o) = self.evaluate(side, k0, lane, input) else {
                     continue;
                 };
-                if std::env::var("PLAN_DEBUG").is_ok() {
-                    let xn = self.xs[self.n];
-                    eprintln!(
-                        "cand {side:?} k0 {k0}: {o:?} psiN {:.2} rN {:.2} psi_rev {:.2} F {:?}",
-                        xn[idx::PSI], xn[idx::R], self.psi_rev,
-                        self.forces.iter().map(|f| (f.x.round(), f.y.round())).collect::<Vec<_>>()
-                    );
-                }
                 let heading_ok = o.heading_error <= self.settings.heading_tol;
                 let tol = self.settings.violation_tol;
                 let road_ok = o.road_margin >= -tol && o.stop_margin >= -tol;
@@ -752,9 +740,6 @@ impl Planner {
         for _ in 0..self.settings.scp_iterations {
             self.fill_qp(trust);
             let st = self.qp.solve();
-            if std::env::var("PLAN_DEBUG").is_ok() {
-                eprintln!("qp {st:?} iters {}", self.qp.iterations());
-            }
             if !st.usable() {
                 if st == QpStatus::MaxTime || st == QpStatus::MaxIterations {
                     break;
