@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 mod models;
 mod mpc;
 mod plant;
+mod planner;
 mod sim;
 mod surrogate;
 
@@ -169,5 +170,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     surrogate::register(m)?;
     mpc::register(m)?;
     sim::register(m)?;
+    planner::register(m)?;
     Ok(())
 }

@@ -55,3 +55,9 @@ for _name in ("ScenarioError", "load_scenarios", "validate_scenario_line", "scre
     if hasattr(_core, _name):
         globals()[_name] = getattr(_core, _name)
         __all__.append(_name)
+
+# The decision layer and the whole-maneuver controller (crates/planner).
+for _name in ("PlannerError", "Planner", "PitController"):
+    if hasattr(_core, _name):
+        globals()[_name] = getattr(_core, _name)
+        __all__.append(_name)

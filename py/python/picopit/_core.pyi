@@ -373,3 +373,164 @@ def scenario_initial_states(text: str) -> InitialStates: ...
 def road_poses(road: str, s: _ArrayLike, d: Optional[_ArrayLike] = None) -> _F64:
     """(n, 3) ``[x, y, heading]`` of a scenario road (JSON of its ``road`` object) at
     stations ``s``, offset laterally by ``d``."""
+
+# --- planner (crates/planner): decision layer and whole-maneuver controller --------------
+
+class PlannerError(ValueError):
+    """Bad planner or controller settings (the message names the field), a bad array shape,
+    a non-finite input, an unknown target model or a missing road."""
+
+class PlanTerminal(TypedDict):
+    heading: float
+    """psi_T,rev: the reversed heading (rad, unwrapped)."""
+    heading_tol: float
+    yaw_decay: float
+    """tau of the projected heading ``psi_N + tau r_N`` (s)."""
+
+class PlanPackage(TypedDict):
+    """The decision package Pi (``planner::DecisionPackage``); N = horizon / dt steps."""
+
+    mode: str
+    """``chase``, ``pit``, ``stabilise`` or ``abort``."""
+    infeasible: Optional[str]
+    """Why no feasible PIT exists: ``terminal_set_unreachable``, ``road_boundary``,
+    ``obstacle_clearance`` or ``numerical``; None when a feasible candidate was found."""
+    time: float
+    side: str
+    """``left`` or ``right``."""
+    contact_point: _F64
+    """(2,) contact point on the target's rear quarter, target body frame (m)."""
+    contact_rel_pos: _F64
+    """(2,) the bullet's contact position relative to the target, target frame (m)."""
+    contact_rel_heading: float
+    push_speed: float
+    envelope_lat: float
+    window: Optional[Tuple[float, float]]
+    """Contact window ``(t0, t1)`` (absolute s), or None when none is planned."""
+    terminal: PlanTerminal
+    road_margin: float
+    obstacle_clearance: float
+    obstacles: _F64
+    """(m, 7) the obstacles planned against, as given to ``set_obstacles``."""
+    predicted_heading_error: float
+    predicted_road_margin: float
+    predicted_clearance: float
+    """Least predicted obstacle clearance (m; a sentinel near 1e3 without obstacles)."""
+    predicted_stop_margin: float
+    objective: float
+    """Objective of the chosen candidate (inf when none was evaluated)."""
+    candidates: int
+    feasible_candidates: int
+    times: _F64
+    """(N+1,) step start times (absolute s)."""
+    forces: _F64
+    """(N+1, 2) the virtual interaction ``[F_n, F_t]`` (N); zero outside the window and at
+    the last entry."""
+    corridor: _F64
+    """(N+1, 2) the normal-force corridor ``[lo, hi]`` (N); zero outside the window."""
+    targets: _F64
+    """(N+1, 8) the predicted target ``[vx, vy, yaw, r, p, phi, X, Y]``."""
+
+class ControllerStep(TypedDict):
+    command: _F64
+    """``[delta_f, T_r]`` to apply now (negative T_r brakes); always finite."""
+    phase: str
+    """``chasing``, ``pit``, ``stabilising``, ``done`` or ``aborted``."""
+    mode: Optional[str]
+    """The upper layer's current mode (as ``PlanPackage.mode``); None without it."""
+    abort: Optional[str]
+    """``chase_timeout``, ``bullet_unstable``, ``bullet_clearance`` or
+    ``decision_infeasible:<reason>`` (reason as ``PlanPackage.infeasible``); None."""
+    mpc_status: Optional[str]
+    """As ``MpcResult.status`` when the MPC ran this step (active phases), else None."""
+    replanned: bool
+    plan_time: float
+    """Wall time of this step's planning (s; 0 when it did not replan)."""
+    ctrl_time: float
+    """Wall time of the rest of the step (s)."""
+
+class Planner:
+    """The upper virtual-PIT decision layer (crates/planner). ``target_model`` is ``4dof`` or
+    the path of a surrogate file; ``settings`` is TOML of ``planner::PlannerSettings``
+    (missing fields default). Bad values raise PlannerError naming the field; a road must be
+    set before planning."""
+
+    def __init__(
+        self,
+        params: str = "full_size",
+        mu: float = 0.9,
+        target_model: str = "4dof",
+        settings: Optional[str] = None,
+    ) -> None: ...
+    def settings_toml(self) -> str: ...
+    @property
+    def target_model(self) -> str: ...
+    def set_road(self, road_toml: str) -> None: ...
+    def set_straight_road(
+        self, length: float = 2000.0, lanes: int = 3, lane_width: float = 3.5, shoulder: float = 1.0
+    ) -> None: ...
+    def set_obstacles(self, obstacles: _ArrayLike) -> None:
+        """(n, 7): ``[x, y, heading, vx, vy, length, width]`` at time 0; n <= 32."""
+    def plan(
+        self,
+        time: float,
+        target: _ArrayLike,
+        bullet: _ArrayLike,
+        target_input: Optional[_ArrayLike] = None,
+        side: Optional[str] = None,
+        best_effort: bool = False,
+    ) -> PlanPackage:
+        """One decision; ``target`` (8,), ``bullet`` (6,), ``target_input`` (2,) or None for
+        zeros; ``side`` None, ``left`` or ``right``. The GIL is released meanwhile."""
+    def predict(
+        self,
+        mode: str,
+        time: float,
+        target: _ArrayLike,
+        bullet: _ArrayLike,
+        target_input: Optional[_ArrayLike] = None,
+    ) -> PlanPackage:
+        """The free (no-force) prediction as a package of ``mode``."""
+
+class PitController:
+    """Planner + coupled MPC + phase machine (``planner::PitController``). ``settings`` is
+    TOML of ``planner::ControllerSettings`` (tables ``planner``, ``phases``, ``mpc``);
+    ``upper_layer=False`` is the ablation without the decision layer (a settings text that
+    says otherwise is a PlannerError)."""
+
+    def __init__(
+        self,
+        params: str = "full_size",
+        mu: float = 0.9,
+        target_model: str = "4dof",
+        settings: Optional[str] = None,
+        upper_layer: bool = True,
+    ) -> None: ...
+    def settings_toml(self) -> str: ...
+    @property
+    def target_model(self) -> str: ...
+    @property
+    def upper_layer(self) -> bool: ...
+    @property
+    def phase(self) -> str:
+        """As ``ControllerStep.phase``."""
+    @property
+    def abort_reason(self) -> Optional[str]:
+        """As ``ControllerStep.abort``."""
+    def set_road(self, road_toml: str) -> None: ...
+    def set_straight_road(
+        self, length: float = 2000.0, lanes: int = 3, lane_width: float = 3.5, shoulder: float = 1.0
+    ) -> None: ...
+    def set_obstacles(self, obstacles: _ArrayLike) -> None: ...
+    def step(
+        self,
+        time: float,
+        target: _ArrayLike,
+        bullet: _ArrayLike,
+        target_input: Optional[_ArrayLike] = None,
+    ) -> ControllerStep:
+        """One control step; the GIL is released meanwhile."""
+    def package(self) -> Optional[PlanPackage]:
+        """The last decision package, or None without the upper layer."""
+    def reset(self) -> None:
+        """Start a new maneuver at the next step (the phase is reset then)."""
