@@ -24,6 +24,12 @@ TARGET = np.array([15.0, 0.0, 0.0, 0.0, 0.0, 0.0, 100.0, 0.0])  # [vx, vy, yaw, 
 BULLET = np.array([94.0, 2.5, 0.0, 17.0, 0.0, 0.0])  # [X, Y, yaw, vx, vy, r]
 # A stopped car in the middle lane 20 m ahead of the target: [x, y, heading, vx, vy, l, w].
 BLOCKER = [[120.0, 0.0, 0.0, 0.0, 0.0, 4.5, 1.8]]
+# Determinism checks lift the wall-clock limits (QP time limit, MPC time budget): with them, a
+# loaded machine could cut a solve short and legitimately change the answer.
+NO_CLOCK_PLANNER = "[qp]\ntime_limit = 10.0\n"
+NO_CLOCK_CONTROLLER = (
+    "[planner.qp]\ntime_limit = 10.0\n[mpc]\ntime_budget = 10.0\n[mpc.qp]\ntime_limit = 10.0\n"
+)
 
 
 def planner(**kw) -> _core.Planner:
@@ -92,8 +98,8 @@ def test_forces_lie_in_the_friction_cone_and_the_window():
 
 
 def test_planning_is_deterministic():
-    a = planner().plan(0.0, TARGET, BULLET)
-    p = planner()
+    a = planner(settings=NO_CLOCK_PLANNER).plan(0.0, TARGET, BULLET)
+    p = planner(settings=NO_CLOCK_PLANNER)
     b = p.plan(0.0, TARGET, BULLET)
     c = p.plan(0.0, TARGET, BULLET)  # the same instance again: no hidden state
     assert same(a, b) and same(b, c)
@@ -105,7 +111,7 @@ def test_planning_is_deterministic():
 
 
 def test_an_obstacle_in_the_spin_zone_aborts_with_a_reason():
-    p = planner()
+    p = planner(settings=NO_CLOCK_PLANNER)
     free = p.plan(0.0, TARGET, BULLET)
     p.set_obstacles(BLOCKER)
     d = p.plan(0.0, TARGET, BULLET)
@@ -236,12 +242,13 @@ def test_bad_inputs_raise_planner_error():
 
 
 def test_a_road_from_toml():
-    p = _core.Planner()
+    p = _core.Planner(settings=NO_CLOCK_PLANNER)
     p.set_road(
         'lanes = 3\nlane_width = 3.5\nshoulder = 1.0\norigin = [0.0, 0.0, 0.0]\n'
         'segments = [{ kind = "straight", length = 2000.0 }]\n'
     )
-    assert same(p.plan(0.0, TARGET, BULLET), planner().plan(0.0, TARGET, BULLET))
+    expected = planner(settings=NO_CLOCK_PLANNER).plan(0.0, TARGET, BULLET)
+    assert same(p.plan(0.0, TARGET, BULLET), expected)
 
 
 def closed_loop(ctl: _core.PitController, steps: int):
@@ -288,7 +295,7 @@ def test_closed_loop_with_the_plant_reaches_the_pit():
 
 
 def test_reset_starts_a_new_maneuver():
-    ctl = _core.PitController()
+    ctl = _core.PitController(settings=NO_CLOCK_CONTROLLER)
     ctl.set_straight_road()
     a, _ = closed_loop(ctl, 5)
     ctl.reset()
