@@ -15,6 +15,7 @@ use numpy::{AllowTypeChange, PyArray1, PyArray2, PyArray3, PyArrayLikeDyn, ToPyA
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
+mod bench;
 mod models;
 mod mpc;
 mod plant;
@@ -171,5 +172,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     mpc::register(m)?;
     sim::register(m)?;
     planner::register(m)?;
+    bench::register(m)?;
     Ok(())
 }

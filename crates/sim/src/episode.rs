@@ -409,6 +409,18 @@ impl Sample {
     }
 }
 
+/// A phase's name in reports: `chasing`, `pit`, `stabilising`, `done`, `aborted`.
+#[must_use]
+pub fn phase_name(p: Phase) -> &'static str {
+    match p {
+        Phase::Chasing => "chasing",
+        Phase::Pit => "pit",
+        Phase::Stabilising => "stabilising",
+        Phase::Done => "done",
+        Phase::Aborted => "aborted",
+    }
+}
+
 /// Index of a phase in recorded trajectories.
 #[must_use]
 pub fn phase_index(p: Phase) -> f64 {

@@ -61,3 +61,9 @@ for _name in ("PlannerError", "Planner", "PitController"):
     if hasattr(_core, _name):
         globals()[_name] = getattr(_core, _name)
         __all__.append(_name)
+
+# The closed-loop episode runner (crates/sim::episode); the benchmark is picopit.bench.
+for _name in ("EpisodeError", "run_episode", "episode_presets", "episode_config", "trajectory_columns"):
+    if hasattr(_core, _name):
+        globals()[_name] = getattr(_core, _name)
+        __all__.append(_name)

@@ -534,3 +534,66 @@ class PitController:
         """The last decision package, or None without the upper layer."""
     def reset(self) -> None:
         """Start a new maneuver at the next step (the phase is reset then)."""
+
+# --- closed-loop episodes (crates/sim::episode) -------------------------------------------
+
+class EpisodeError(ValueError):
+    """An episode that cannot be run: a bad configuration (the message names the field), a
+    model file that cannot be loaded, or settings the controller refuses."""
+
+class EpisodeResult(TypedDict):
+    scenario: str
+    config: str
+    seed: int
+    model: str
+    """``4dof``, ``pinn`` or ``picopinn``."""
+    param_count: int
+    upper_layer: bool
+    success: bool
+    cause: Optional[str]
+    """First failure cause: ``decision_infeasible``, ``no_termination``,
+    ``boundary_violation``, ``secondary_collision``, ``unsafe_rebound``; None on success."""
+    decided_at: Optional[float]
+    terminal_heading_error: float
+    """rad, at the last observation."""
+    min_margin: float
+    """m, smallest footprint distance to a road edge or obstacle (negative: crossed)."""
+    boundary_violation: bool
+    secondary_collision: bool
+    contacts: int
+    sim_time: float
+    control_steps: int
+    plan_count: int
+    plan_ms_median: float
+    plan_ms_p99: float
+    plan_ms_max: float
+    ctrl_count: int
+    ctrl_ms_median: float
+    ctrl_ms_p99: float
+    ctrl_ms_max: float
+    final_phase: str
+    abort: Optional[str]
+    mpc_failures: int
+    mpc_time_budget: int
+    wall_time: float
+    plan_times_ms: _F64
+    """Every planning time (ms) of the episode (steps that planned)."""
+    ctrl_times_ms: _F64
+    """Every control time (ms) of the episode (steps the MPC ran)."""
+    trajectory: Optional[_F64]
+    """(steps, 26) per control step when recorded; columns: ``trajectory_columns()``."""
+
+def episode_presets() -> List[str]:
+    """``['4dof', 'pinn', 'picopinn', 'picopinn_no_upper']``."""
+def episode_config(config: str) -> Dict[str, Any]:
+    """The resolved configuration of a preset name or JSON text (``{"preset": ..., ...}``)."""
+def trajectory_columns() -> List[str]: ...
+def run_episode(
+    scenario: str,
+    config: str,
+    seed: int = 0,
+    record: bool = False,
+    models_dir: Optional[str] = None,
+) -> EpisodeResult:
+    """One closed-loop episode (scenario as JSON text; config a preset name or JSON); the
+    GIL is released while it runs."""

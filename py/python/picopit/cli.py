@@ -200,6 +200,42 @@ def _scenarios_parser(sub) -> None:
     p.set_defaults(func=_cmd_scenarios)
 
 
+def _bench_parser(sub) -> None:
+    from .bench import SUBSET_SIZE
+
+    p = sub.add_parser(
+        "bench",
+        help="the closed-loop benchmark: scenarios x controller configurations, tables and figures",
+        description=(
+            "Run the hierarchical PIT controller in closed loop on the plant over the PIT Scenario "
+            f"Dataset: by default a fixed stratified subset of {SUBSET_SIZE} scenes (road category x "
+            "adhesion band) x the four configurations (4dof, pinn, picopinn with the upper layer, "
+            "picopinn_no_upper). Writes summary.md/.csv/.json, episodes.parquet, panels.png, the "
+            "representative success and failure cases (PNG and MCAP) to the run folder."
+        ),
+    )
+    p.add_argument("--scenarios", default="data/scenarios.jsonl", metavar="JSONL",
+                   help="scenario dataset (default data/scenarios.jsonl)")
+    p.add_argument("--models", default="models", metavar="DIR",
+                   help="model folder: DIR/<params>/{pinn,picopinn}.safetensors (default models)")
+    p.add_argument("--full", action="store_true", help="all scenes of the dataset, not the stratified subset")
+    p.add_argument("--configs", default="4dof,pinn,picopinn,picopinn_no_upper", metavar="LIST",
+                   help="comma-separated configurations (default all four: 4dof,pinn,picopinn,picopinn_no_upper)")
+    p.add_argument("--limit", type=int, metavar="N", help="at most N scenes (evenly spaced over the scene set)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the episodes' noise and actuator errors (default 0)")
+    p.add_argument("--uncertainty", metavar="JSON",
+                   help="sensing noise / latency / actuator errors for every configuration, e.g. "
+                        "'{\"position_std\": 0.05, \"latency\": 0.02}' (default none)")
+    p.add_argument("--out", metavar="DIR", help="run folder (default runs/bench-<timestamp>)")
+    p.add_argument("--json", metavar="PATH", help="also write the summary JSON here")
+    p.add_argument("--workers", type=int, default=0, metavar="W", help="worker processes (default 0: all cores)")
+    p.add_argument("--ray-address", metavar="ADDR",
+                   help="run the episodes on a Ray cluster: an address for ray.init, or 'local' to start one here")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures, the case re-runs and the MCAP")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_bench)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -217,6 +253,7 @@ def build_parser() -> argparse.ArgumentParser:
     _compress_parser(sub)
     _eval_parser(sub)
     _scenarios_parser(sub)
+    _bench_parser(sub)
     return parser
 
 
@@ -448,6 +485,32 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from . import bench
+
+    cfg = bench.BenchConfig(
+        scenarios=Path(args.scenarios), models=Path(args.models), full=args.full,
+        configs=bench.parse_configs(args.configs), limit=args.limit, seed=args.seed, workers=args.workers,
+        ray_address=args.ray_address,
+        uncertainty=bench.parse_uncertainty(args.uncertainty) if args.uncertainty else None,
+        cases=not args.no_figures, figures=not args.no_figures,
+    ).validate()
+    out = Path(args.out) if args.out else Path("runs") / ("bench-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S"))
+    started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    res = bench.run(cfg, progress=not args.no_progress)
+    extra = {"command": _command_line(_ARGV), "created": started, "git_commit": bench.git_commit()}
+    paths = bench.write_outputs(res, cfg, out, extra)
+    if args.json:
+        bench.write_json(paths["json"], Path(args.json))
+    print(bench.markdown(res.summary), end="")
+    for n in res.notes:
+        print(f"bench: note: {n}")
+    print(f"bench: {len(res.scenes)} scenes x {len(cfg.configs)} configurations in {res.seconds:.0f} s "
+          f"on {cfg.n_workers()} workers (seed {cfg.seed})")
+    print("bench: wrote " + ", ".join(str(p) for p in paths.values()) + (f", {args.json}" if args.json else ""))
+    return 0
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     from . import ParamError
     from .simulate import ConfigError
@@ -468,6 +531,11 @@ def main(argv: Optional[List[str]] = None) -> int:
         from ._core import ScenarioError
 
         bad_input += (ScenarioGenError, ScenarioError)
+    if args.command == "bench":
+        from .bench import BenchError
+        from ._core import EpisodeError, ScenarioError
+
+        bad_input += (BenchError, EpisodeError, ScenarioError)
     try:
         return int(args.func(args))
     except bad_input as e:

@@ -1,0 +1,197 @@
+"""`picopit bench` end to end on a few scenes, its option checks, the stratified scene set,
+the episode binding, and the same work on a local Ray instance (when ray is installed)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import picopit
+from conftest import has
+
+pytestmark = pytest.mark.skipif(not has("run_episode"), reason="sim::episode not bound yet")
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIOS = REPO / "data" / "scenarios.jsonl"
+MODELS = REPO / "models"
+PRESETS = ["4dof", "pinn", "picopinn", "picopinn_no_upper"]
+
+
+def picopit_cmd() -> list:
+    script = Path(sys.executable).parent / "picopit"
+    return [str(script)] if script.exists() else [sys.executable, "-m", "picopit.cli"]
+
+
+def run_cli(*args: str, cwd: Path):
+    return subprocess.run(picopit_cmd() + ["bench", "--scenarios", str(SCENARIOS), "--models", str(MODELS)]
+                          + list(args), cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def bench_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("bench")
+    proc = run_cli("--limit", "3", "--out", "run", "--json", "out/summary.json", "--workers", "2",
+                   "--no-progress", cwd=tmp)
+    return proc, tmp
+
+
+def test_bench_writes_the_tables_json_episodes_and_figures(bench_run):
+    proc, tmp = bench_run
+    assert proc.returncode == 0, proc.stderr
+    run = tmp / "run"
+    for name in ("summary.md", "summary.csv", "summary.json", "panels.png"):
+        assert (run / name).stat().st_size > 0, name
+    doc = json.loads((tmp / "out" / "summary.json").read_text())
+    assert doc == json.loads((run / "summary.json").read_text())
+    assert list(doc["configs"]) == PRESETS
+    for name, s in doc["configs"].items():
+        assert s["episodes"] == 3
+        assert 0.0 <= s["success_rate"] <= 100.0
+        assert s["ctrl_ms_median"] > 0.0
+        for key in ("success_straight", "success_curved", "success_low", "success_mid", "success_high",
+                    "heading_error_deg_median", "min_margin_m_median", "boundary_violation_rate",
+                    "secondary_collision_rate", "plan_ms_median", "plan_ms_p99", "ctrl_ms_p99", "param_count",
+                    "fail_decision_infeasible", "fail_no_termination", "fail_boundary_violation",
+                    "fail_secondary_collision", "fail_unsafe_rebound"):
+            assert key in s, (name, key)
+        causes = sum(s[f"fail_{c}"] for c in ("decision_infeasible", "no_termination", "boundary_violation",
+                                              "secondary_collision", "unsafe_rebound", "error"))
+        assert causes + s["success_rate"] == pytest.approx(100.0), "every episode has one outcome"
+    # The upper layer plans; without it nothing does.
+    assert doc["configs"]["picopinn"]["plan_ms_median"] > 0.0
+    assert doc["configs"]["picopinn_no_upper"]["plan_ms_median"] is None
+    assert doc["configs"]["4dof"]["param_count"] == 0
+    assert doc["configs"]["pinn"]["param_count"] > doc["configs"]["picopinn"]["param_count"] > 0
+    assert doc["run"]["scenes"] == 3 and len(doc["run"]["scene_ids"]) == 3
+    md = (run / "summary.md").read_text()
+    assert "| config | episodes | success % | straight % | curved %" in md
+    assert "Failure causes" in md
+    with open(run / "summary.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["config"] for r in rows] == PRESETS
+    assert "bench: 3 scenes x 4 configurations" in proc.stdout
+
+
+def test_per_episode_results_agree_with_the_summary(bench_run):
+    proc, tmp = bench_run
+    assert proc.returncode == 0, proc.stderr
+    run = tmp / "run"
+    doc = json.loads((run / "summary.json").read_text())
+    if (run / "episodes.parquet").exists():
+        pq = pytest.importorskip("pyarrow.parquet")
+        table = pq.read_table(run / "episodes.parquet").to_pylist()
+    else:  # pyarrow missing: the CSV fallback, said so in the notes
+        assert any("CSV" in n for n in doc["run"]["notes"])
+        with open(run / "episodes.csv") as fh:
+            table = [dict(r, success=r["success"] == "True") for r in csv.DictReader(fh)]
+    assert len(table) == 12
+    for name in PRESETS:
+        rows = [r for r in table if r["config"] == name]
+        assert len(rows) == 3
+        rate = 100.0 * sum(bool(r["success"]) for r in rows) / 3
+        assert doc["configs"][name]["success_rate"] == pytest.approx(rate)
+        assert {r["scenario"] for r in rows} == set(doc["run"]["scene_ids"])
+
+
+def test_representative_cases_are_drawn_and_logged(bench_run):
+    proc, tmp = bench_run
+    assert proc.returncode == 0, proc.stderr
+    run = tmp / "run"
+    notes = json.loads((run / "summary.json").read_text())["run"]["notes"]
+    drawn = [k for k in ("success", "failure") if (run / f"case_{k}.png").exists()]
+    for k in ("success", "failure"):
+        assert k in drawn or any(f"no {k} episode" in n for n in notes), k
+    if drawn:
+        if (run / "cases.mcap").exists():
+            reader = pytest.importorskip("mcap.reader")
+            with open(run / "cases.mcap", "rb") as fh:
+                r = reader.make_reader(fh)
+                topics = {c.topic for c in r.get_summary().channels.values()}
+                msgs = [json.loads(m.data) for _, _, m in r.iter_messages(topics=[f"/{drawn[0]}/step"])]
+            assert f"/{drawn[0]}/summary" in topics
+            assert msgs and {"time", "target", "bullet", "command", "phase"} <= set(msgs[0])
+        else:
+            assert (run / "cases.mcap.txt").exists()
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--configs", "4dof,fivedof"], "--configs: unknown configuration 'fivedof'"),
+    (["--configs", ""], "--configs: no configuration"),
+    (["--configs", "pinn,pinn"], "--configs: a configuration is repeated"),
+    (["--limit", "0"], "--limit = 0"),
+    (["--uncertainty", '{"latency": 9}'], "uncertainty.latency"),
+    (["--uncertainty", "[1]"], "--uncertainty"),
+])
+def test_bad_options_are_refused_with_a_message(tmp_path, monkeypatch, capsys, args, needle):
+    from picopit.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    rc = main(["bench", "--scenarios", str(SCENARIOS), "--models", str(MODELS), *args, "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert needle in err
+    if "fivedof" in needle:
+        assert "picopinn_no_upper" in err, "lists the known configurations"
+    assert not (tmp_path / "runs").exists()
+
+
+def test_the_default_scene_set_is_a_fixed_stratified_subset():
+    from picopit.bench import SUBSET_SIZE, stratified_subset
+
+    scenarios = picopit.load_scenarios(str(SCENARIOS))
+    a = stratified_subset(scenarios)
+    assert a == stratified_subset(scenarios), "deterministic"
+    assert len(a) == SUBSET_SIZE == len(set(a))
+    strata = {}
+    for sc in scenarios:
+        strata.setdefault((sc["category"], sc["adhesion"]), 0)
+        strata[(sc["category"], sc["adhesion"])] += 1
+    for key, count in strata.items():
+        got = sum((scenarios[i]["category"], scenarios[i]["adhesion"]) == key for i in a)
+        share = SUBSET_SIZE * count / len(scenarios)
+        assert max(1, int(share)) <= got <= int(share) + 1, (key, got, share)
+    assert len(stratified_subset(scenarios[:10], 128)) == 10
+
+
+def test_the_episode_binding_refuses_bad_input_and_records_on_request():
+    line = SCENARIOS.read_text().splitlines()[0]
+    with pytest.raises(picopit.EpisodeError, match="uncertainty.latency"):
+        picopit.run_episode(line, '{"uncertainty": {"latency": "x"}}', 0, models_dir=str(MODELS))
+    with pytest.raises(picopit.EpisodeError, match="known: 4dof"):
+        picopit.run_episode(line, "fivedof", 0, models_dir=str(MODELS))
+    with pytest.raises(picopit.ScenarioError, match="mu"):
+        sc = json.loads(line)
+        sc["mu"] = 9.0
+        picopit.run_episode(json.dumps(sc), "4dof", 0, models_dir=str(MODELS))
+    with pytest.raises(picopit.EpisodeError, match="nonexistent"):
+        picopit.run_episode(line, "pinn", 0, models_dir="/nonexistent")
+    sc = json.loads(line)
+    sc["t_max"] = 1.0
+    r = picopit.run_episode(json.dumps(sc), "4dof", 3, record=True, models_dir=str(MODELS))
+    assert r["seed"] == 3 and r["decided_at"] is not None and r["decided_at"] <= 1.0 + 1e-9
+    traj = r["trajectory"]
+    assert traj.shape == (r["control_steps"], len(picopit.trajectory_columns()))
+    t = traj[:, picopit.trajectory_columns().index("time")]
+    assert np.all(np.diff(t) > 0) and t[-1] == pytest.approx(r["sim_time"])
+    assert len(r["ctrl_times_ms"]) == r["ctrl_count"]
+    assert picopit.episode_config("picopinn_no_upper")["controller"]["upper_layer"] is False
+
+
+def test_ray_runs_the_same_episodes_as_local_processes():
+    pytest.importorskip("ray")
+    from picopit import bench
+
+    cfg = bench.BenchConfig(scenarios=SCENARIOS, models=MODELS, configs=("4dof",), limit=2, workers=2,
+                            cases=False, figures=False).validate()
+    local = bench.run(cfg, progress=False)
+    cfg.ray_address = "local"
+    remote = bench.run(cfg, progress=False)
+    key = lambda rows: [(r["config"], r["index"], r["success"], r["cause"], r["contacts"]) for r in rows]  # noqa: E731
+    assert key(remote.rows) == key(local.rows)
+    assert remote.summary["4dof"]["episodes"] == 2
