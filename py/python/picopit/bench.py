@@ -590,7 +590,7 @@ def plot_case(case: Mapping[str, Any], sc: Mapping[str, Any], path: Path, title:
     pad = 8.0 * max(p["bullet"]["length"], p["target"]["length"]) / 4.5
     ax.set_xlim(xs.min() - pad, xs.max() + pad)
     ax.set_ylim(ys.min() - pad, ys.max() + pad)
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("X (m)")
     ax.set_ylabel("Y (m)")
     ax.legend(loc="upper left", fontsize=8)
