@@ -255,6 +255,16 @@ struct Vec2Copy {
     y: f64,
 }
 
+/// The largest drive torque (N m) the MPC may plan: the actuator's limit, or the torque that
+/// uses `fraction` of the rear axle's static traction μ m g l_f / L, whichever is smaller. The
+/// bullet model has no combined-slip limit, so without this bound it plans full drive torque
+/// on a slippery road and the real rear axle breaks away (power oversteer).
+fn traction_limited_torque(b: &dynamics::params::VehicleParams, mu: f64, fraction: f64) -> f64 {
+    let rear_load = b.mass * 9.81 * b.lf / (b.lf + b.lr);
+    let torque = fraction * mu * rear_load * b.wheel_radius / (b.drive_efficiency * b.gear_ratio);
+    b.drive_torque_max.min(torque)
+}
+
 /// The coupled collision MPC: both vehicles' states, the bullet's inputs and the shared
 /// contact force over the horizon, solved by SCP over Clarabel QPs.
 ///
@@ -360,7 +370,7 @@ impl CoupledMpc {
                 steer_max: b.steer_max,
                 steer_rate: b.steer_rate_max,
                 torque_min: b.drive_torque_min,
-                torque_max: b.drive_torque_max,
+                torque_max: traction_limited_torque(b, mu, settings.traction_fraction),
                 t_scale,
                 f_scale,
             },

@@ -174,6 +174,9 @@ pub struct MpcSettings {
     pub road_margin: f64,
     /// Clearance to obstacles (m), d_safe.
     pub obstacle_clearance: f64,
+    /// Share of the rear axle's static traction (μ m g l_f / L) the planned drive torque
+    /// may use (the rest is left for cornering); see `CoupledMpc`.
+    pub traction_fraction: f64,
     pub weights: Weights,
     pub contact: ContactSettings,
     pub qp: QpSettings,
@@ -192,6 +195,7 @@ impl Default for MpcSettings {
             step_tol: 0.02,
             road_margin: 0.2,
             obstacle_clearance: 0.5,
+            traction_fraction: 0.85,
             weights: Weights::default(),
             contact: ContactSettings::default(),
             qp: QpSettings::default(),
@@ -234,6 +238,7 @@ impl MpcSettings {
         let positive = [
             ("dt", self.dt),
             ("time_budget", self.time_budget),
+            ("traction_fraction", self.traction_fraction),
             ("trust_steer", self.trust_steer),
             ("trust_torque", self.trust_torque),
             ("step_tol", self.step_tol),

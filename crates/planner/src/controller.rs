@@ -84,6 +84,8 @@ pub struct PitController {
     started: bool,
     /// The target's heading when the PIT phase began (the frame of the push).
     pit_frame: Option<f64>,
+    /// Consecutive infeasible decisions while chasing.
+    infeasible_count: u32,
     clock: Box<dyn Clock + Send + Sync>,
 }
 
@@ -125,6 +127,7 @@ impl PitController {
             next_replan: f64::NEG_INFINITY,
             started: false,
             pit_frame: None,
+            infeasible_count: 0,
             clock: Box::new(MonotonicClock::new()),
             settings,
         })
@@ -157,10 +160,10 @@ impl PitController {
         self.phases.abort_reason()
     }
 
-    /// The last decision package (upper layer on).
+    /// The last decision package of this maneuver (upper layer on, once it has planned).
     #[must_use]
     pub fn package(&self) -> Option<&DecisionPackage> {
-        self.settings.upper_layer.then(|| self.planner.package())
+        (self.settings.upper_layer && self.next_replan.is_finite()).then(|| self.planner.package())
     }
 
     #[must_use]
@@ -183,8 +186,10 @@ impl PitController {
         self.mpc.target_param_count()
     }
 
-    /// Start a new maneuver (phase chasing, no plan, MPC warm start dropped).
+    /// Start a new maneuver (phase chasing, no plan, MPC warm start dropped); the phase
+    /// clock starts at the next step.
     pub fn reset(&mut self) {
+        self.phases.reset(0.0);
         self.started = false;
         self.pit_frame = None;
         self.next_replan = f64::NEG_INFINITY;
@@ -226,6 +231,7 @@ impl PitController {
         if !self.started {
             self.started = true;
             self.pit_frame = None;
+            self.infeasible_count = 0;
             self.phases.reset(input.time);
             let rel = crate::href::relative_position(&input.target, &input.bullet);
             let side = if rel.y >= 0.0 { Side::Left } else { Side::Right };
@@ -266,7 +272,14 @@ impl PitController {
         // The upper layer: replan on its period and on every phase change.
         let mut replanned = false;
         let mut plan_time = 0.0;
-        if upper && phase.is_active() && (changed || input.time + 1e-9 >= self.next_replan) {
+        // A window that opened while the bullet is still chasing is stale (the bullet is late):
+        // replan now rather than follow a plan whose push is under way without contact.
+        let stale = phase == Phase::Chasing && {
+            let p = self.planner.package();
+            p.mode == Mode::Pit && input.time > p.window.0 + self.settings.mpc.dt
+        };
+        if upper && phase.is_active() && (changed || stale || input.time + 1e-9 >= self.next_replan)
+        {
             let tp = self.clock.now();
             // During the PIT the side is committed: only its window and forces are replanned.
             let committed = (phase == Phase::Pit && self.planner.package().mode == Mode::Pit)
@@ -283,10 +296,16 @@ impl PitController {
             };
             let pkg = self.planner.plan(&pin)?;
             if phase == Phase::Chasing && pkg.mode == Mode::Abort {
-                let reason = pkg.infeasible.unwrap_or(crate::Infeasible::Numerical);
-                self.phases
-                    .abort(AbortReason::DecisionInfeasible(reason), input.time);
-            } else if pkg.mode == Mode::Stabilise {
+                self.infeasible_count += 1;
+                if self.infeasible_count >= self.settings.phases.infeasible_patience {
+                    let reason = pkg.infeasible.unwrap_or(crate::Infeasible::Numerical);
+                    self.phases
+                        .abort(AbortReason::DecisionInfeasible(reason), input.time);
+                }
+            } else {
+                self.infeasible_count = 0;
+            }
+            if pkg.mode == Mode::Stabilise {
                 self.phases.stabilise(input.time);
             }
             let period = if phase == Phase::Pit {
@@ -313,9 +332,11 @@ impl PitController {
                     &mut self.reference,
                     &input.target,
                     &input.bullet,
-                    input.time,
-                    dt,
-                    self.pit_frame,
+                    crate::href::Timing {
+                        time: input.time,
+                        dt,
+                        pit_frame: self.pit_frame,
+                    },
                 );
             } else {
                 self.default_pit.fill(

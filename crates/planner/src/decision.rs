@@ -310,7 +310,7 @@ impl Planner {
     }
 
     /// Earliest time (s from now) the bullet can be at its contact pose on `side`: a simple
-    /// approach model (closing at `approach_speed` relative to the target, moving across at
+    /// approach model (closing on the target as `PlannerSettings::closing_time`, moving across at
     /// `lateral_speed` at the same time, plus a settling time); crossing behind the target to the other side
     /// adds the way back and forth.
     fn earliest_arrival(&self, side: Side, xt: &TargetState, xb: &BulletState) -> f64 {
@@ -331,7 +331,7 @@ impl Planner {
                 - 0.5;
             dx = (rel.x - behind).max(0.0) + (c.rel_pos.x - behind).abs();
         }
-        s.settle_time + (dx / s.approach_speed).max(dy / s.lateral_speed)
+        s.settle_time + s.closing_time(dx).max(dy / s.lateral_speed)
     }
 
     /// Plan from the current state: search the candidates and fill the package.
@@ -377,6 +377,7 @@ impl Planner {
         }
         let mut best: Option<Outcome> = None;
         let mut best_any: Option<Outcome> = None;
+        let mut closed_sides = 0usize;
         let mut candidates = 0u32;
         let mut feasible = 0u32;
         let sides: &[Side] = match input.side {
@@ -390,6 +391,12 @@ impl Planner {
             },
         };
         for &side in sides {
+            // No room for the bullet beside the target on this side: not a candidate (a
+            // committed side in contact is kept).
+            if input.side.is_none() && !self.side_open(side, input) {
+                closed_sides += 1;
+                continue;
+            }
             let t_arr = self.earliest_arrival(side, &input.target, &input.bullet);
             // In contact already: the window starts now.
             let offsets = if t_arr == 0.0 {
@@ -427,7 +434,11 @@ impl Planner {
         self.package.feasible_candidates = feasible;
         // An abort reports the free prediction; `best_any` only ranks the failures.
         let chosen = best.or(best_any);
-        let mode = if candidates == 0 {
+        // No side leaves the bullet room to line up: no PIT is possible here.
+        let no_room = closed_sides == sides.len();
+        let mode = if no_room {
+            Mode::Abort
+        } else if candidates == 0 {
             Mode::Chase
         } else if best.is_some() || (input.best_effort && best_any.is_some()) {
             Mode::Pit
@@ -438,7 +449,10 @@ impl Planner {
         // (within `BINDING` m) obstacle or road row explains why the heading was not
         // reached; otherwise the push itself falls short (or overshoots).
         const BINDING: f64 = 0.25;
-        let infeasible = (best.is_none() && candidates > 0).then(|| match best_any {
+        let infeasible = if no_room {
+            Some(Infeasible::RoadBoundary)
+        } else if best.is_none() && candidates > 0 {
+            Some(match best_any {
             None => Infeasible::Numerical,
             Some(o) if o.clearance < self.settings.obstacle_clearance + BINDING => {
                 Infeasible::ObstacleClearance
@@ -447,7 +461,10 @@ impl Planner {
                 Infeasible::RoadBoundary
             }
             Some(_) => Infeasible::TerminalSetUnreachable,
-        });
+            })
+        } else {
+            None
+        };
         match chosen.filter(|_| mode == Mode::Pit) {
             Some(o) => {
                 self.forces.copy_from_slice(&self.best);
@@ -505,13 +522,32 @@ impl Planner {
         }
     }
 
+    /// Lateral room (m) the bullet has on `side` at its stand-off pose beside the target's
+    /// rear quarter: the road margin of that pose's outer edge (negative: over the edge).
+    fn side_room(&self, side: Side, input: &PlannerInput<'_>) -> f64 {
+        let c = self.contact_pose(side);
+        let pose = Pose2::new(input.target[idx::X], input.target[idx::Y], input.target[idx::PSI]);
+        let outer = c.rel_pos.y + side.sign() * (self.settings.standoff + 0.5 * self.params.bullet.width);
+        let p = pose.world_from_body(Vec2::new(c.rel_pos.x, outer));
+        input.road.half_width() - input.road.project(p).d.abs()
+    }
+
+    /// Whether the bullet can line up on `side` inside the road (with the road margin).
+    fn side_open(&self, side: Side, input: &PlannerInput<'_>) -> bool {
+        self.side_room(side, input) >= self.settings.road_margin
+    }
+
+    /// The side the bullet works on when no candidate decides it: the side it is on, unless
+    /// the road leaves no room there and does on the other side.
     fn bullet_side(&self, input: &PlannerInput<'_>) -> Side {
         let rel = Pose2::new(input.target[idx::X], input.target[idx::Y], input.target[idx::PSI])
             .body_from_world(Vec2::new(input.bullet[0], input.bullet[1]));
-        if rel.y >= 0.0 {
-            Side::Left
+        let own = if rel.y >= 0.0 { Side::Left } else { Side::Right };
+        let other = if own == Side::Left { Side::Right } else { Side::Left };
+        if !self.side_open(own, input) && self.side_open(other, input) {
+            other
         } else {
-            Side::Right
+            own
         }
     }
 
@@ -630,12 +666,22 @@ impl Planner {
     }
 
     /// Where the target comes to rest if it slides on from `x` at a constant deceleration
-    /// (a fraction of μ g), heading held: its footprint's pose `[X, Y, ψ]`.
-    fn stop_pose(&self, x: &TargetState) -> [f64; 3] {
+    /// (a fraction of μ g), its pose `[X, Y, ψ]`: the slide is split into its components
+    /// along and across the road at the target, and carried along the road's reference line
+    /// (so that on a curve a target sliding along the lane stays in it), heading turning
+    /// with the road.
+    fn stop_pose(&self, road: &Road, x: &TargetState) -> [f64; 3] {
         let v = rotate(x[idx::PSI], Vec2::new(x[idx::VX], x[idx::VY]));
         let decel = self.settings.stop_decel_fraction * self.mu.max(0.05) * GRAVITY;
-        let d = v * (v.norm() / (2.0 * decel));
-        [x[idx::X] + d.x, x[idx::Y] + d.y, x[idx::PSI]]
+        let t = v.norm() / (2.0 * decel);
+        let f = road.project(Vec2::new(x[idx::X], x[idx::Y]));
+        let (sh, ch) = f.heading.sin_cos();
+        let v_s = v.x * ch + v.y * sh;
+        let v_d = -v.x * sh + v.y * ch;
+        let s_stop = f.s + v_s * t;
+        let p = road.to_world(s_stop, f.d + v_d * t);
+        let turn = road.pose_at(s_stop).heading - f.heading;
+        [p.x, p.y, x[idx::PSI] + turn]
     }
 
     /// Linearise the soft rows at the current rollout.
@@ -663,7 +709,7 @@ impl Planner {
         // The stopping point: its road row, chained through the stop pose's Jacobian
         // (central differences of a closed-form map).
         let xn = self.xs[self.n];
-        let sp = self.stop_pose(&xn);
+        let sp = self.stop_pose(road, &xn);
         let fp = Obb::vehicle_footprint(
             &Pose2::new(sp[0], sp[1], sp[2]),
             self.params.target.length,
@@ -678,7 +724,7 @@ impl Planner {
             xp[i] += h;
             let mut xm = xn;
             xm[i] -= h;
-            let (p, m) = (self.stop_pose(&xp), self.stop_pose(&xm));
+            let (p, m) = (self.stop_pose(road, &xp), self.stop_pose(road, &xm));
             *c = (0..3).map(|d| r.grad[d] * (p[d] - m[d]) / (2.0 * h)).sum();
         }
         self.stop_row = (coeff, r.rhs);
@@ -1037,8 +1083,8 @@ fn assemble(v: &RowsView<'_>, ep: &mut Emitter<'_>, ea: &mut Emitter<'_>, q: &mu
         }
     }
     for &(wt, h, which) in &terms {
-        for c in 0..cols {
-            q[c] += 2.0 * wt * h * g(which, c);
+        for (c, qc) in q.iter_mut().enumerate().take(cols) {
+            *qc += 2.0 * wt * h * g(which, c);
         }
     }
     // Effort, proximal and smoothness on the forces (scaled units).

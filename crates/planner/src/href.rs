@@ -14,6 +14,15 @@ pub fn relative_position(xt: &TargetState, xb: &BulletState) -> Vec2 {
     Pose2::new(xt[idx::X], xt[idx::Y], xt[idx::PSI]).body_from_world(Vec2::new(xb[0], xb[1]))
 }
 
+/// When the reference is for: the control step's time, the MPC's step, and the target's
+/// heading when the push began (the PIT phase's frame; `None` before it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timing {
+    pub time: f64,
+    pub dt: f64,
+    pub pit_frame: Option<f64>,
+}
+
 /// Fill the MPC reference for the control step at `time` (stage k refers to
 /// `time + (k + 1)·dt`).
 ///
@@ -25,18 +34,18 @@ pub fn relative_position(xt: &TargetState, xb: &BulletState) -> Vec2 {
 ///   start).
 ///   The target objective tracks the planned heading at the end of the MPC's horizon
 ///   (the virtual rollout's prediction), so the MPC pushes as much as the plan needs.
-/// * Chase: close in to just behind the contact station, no force.
-/// * Stabilise and abort: fall back, no force, no target objective.
+/// * Chase (and abort, while the controller's patience lasts): close in to just behind the
+///   contact station, no force.
+/// * Stabilise: fall back, no force, no target objective.
 pub fn fill_reference(
     pkg: &DecisionPackage,
     s: &PlannerSettings,
     r: &mut Reference,
     xt: &TargetState,
     xb: &BulletState,
-    time: f64,
-    dt: f64,
-    pit_frame: Option<f64>,
+    at: Timing,
 ) {
+    let Timing { time, dt, pit_frame } = at;
     let rel = relative_position(xt, xb);
     let psi_now = xt[idx::PSI];
     let side = pkg.side.sign();
@@ -71,7 +80,7 @@ pub fn fill_reference(
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
                 *st = if tau < t0 - s.turn_in {
-                    approach(rel, stand, time, arrive, tau, s.approach_speed)
+                    approach(rel, stand, time, arrive, tau, s.approach_speed_far)
                 } else if tau <= t1 {
                     let (lo, hi) = pkg
                         .step_at(tau.max(t0))
@@ -99,17 +108,19 @@ pub fn fill_reference(
             r.target_heading = pkg.heading_at(horizon_end).unwrap_or(pkg.terminal.heading);
             r.target_weight = if horizon_end >= t0 { 1.0 } else { 0.0 };
         }
-        Mode::Chase => {
+        // An infeasible decision while chasing: keep station behind (the controller aborts
+        // after its patience).
+        Mode::Chase | Mode::Abort => {
             let hold = Vec2::new(stand.x - 1.0, stand.y);
-            let arrive = time + ((hold.x - rel.x).abs() / s.approach_speed).max(dt);
+            let arrive = time + s.closing_time(hold.x - rel.x).max(dt);
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
-                *st = approach(rel, hold, time, arrive, tau, s.approach_speed);
+                *st = approach(rel, hold, time, arrive, tau, s.approach_speed_far);
             }
             r.target_heading = pkg.terminal.heading;
             r.target_weight = 0.0;
         }
-        Mode::Stabilise | Mode::Abort => {
+        Mode::Stabilise => {
             r.stages.iter_mut().for_each(|st| *st = back);
             r.target_heading = pkg.terminal.heading;
             r.target_weight = 0.0;

@@ -25,7 +25,8 @@ pub enum Mode {
 pub enum Infeasible {
     /// No virtual push over any tried window reaches the reversed-heading terminal set.
     TerminalSetUnreachable,
-    /// Every push that reverses the target takes it (or its stopping point) over a road edge.
+    /// Every push that reverses the target takes it (or its stopping point) over a road edge,
+    /// or the road leaves the bullet no room to line up beside the target on either side.
     RoadBoundary,
     /// Every push that reverses the target brings it within d_safe of an obstacle.
     ObstacleClearance,

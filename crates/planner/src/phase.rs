@@ -160,10 +160,9 @@ impl PhaseMachine {
                 self.enter(Phase::Stabilising, o.time);
             }
             Phase::Chasing => {
-                if o.mode == Some(Mode::Abort) {
-                    let reason = o.infeasible.unwrap_or(Infeasible::TerminalSetUnreachable);
-                    self.abort(AbortReason::DecisionInfeasible(reason), o.time);
-                } else if o.gap <= s.contact_gap {
+                // (An infeasible decision aborts through `abort`, after the controller's
+                // patience: the observation's mode alone does not.)
+                if o.gap <= s.contact_gap {
                     self.enter(Phase::Pit, o.time);
                 } else if in_phase > s.chase_timeout {
                     self.abort(AbortReason::ChaseTimeout, o.time);
@@ -262,6 +261,8 @@ mod tests {
         o.mode = Some(Mode::Abort);
         o.infeasible = Some(Infeasible::RoadBoundary);
         m.update(&o);
+        assert_eq!(m.phase(), Phase::Chasing, "an infeasible package alone does not abort");
+        m.abort(AbortReason::DecisionInfeasible(Infeasible::RoadBoundary), 0.6);
         assert_eq!(
             m.abort_reason(),
             Some(AbortReason::DecisionInfeasible(Infeasible::RoadBoundary))

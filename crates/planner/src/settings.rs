@@ -105,8 +105,10 @@ pub struct PlannerSettings {
     pub overlap: f64,
     pub push_speed: f64,
     /// Bullet approach model for the earliest arrival: closing speed relative to the target
-    /// (m/s), lateral speed (m/s) and a settling time (s).
+    /// near it and from afar (m/s; a distance d takes `min(d / near, 1.5 s + d / far)`),
+    /// lateral speed (m/s) and a settling time (s).
     pub approach_speed: f64,
+    pub approach_speed_far: f64,
     pub lateral_speed: f64,
     pub settle_time: f64,
     /// Stand-off outside the contact line while closing in (m).
@@ -153,6 +155,7 @@ impl Default for PlannerSettings {
             overlap: 0.05,
             push_speed: 1.0,
             approach_speed: 2.5,
+            approach_speed_far: 8.0,
             lateral_speed: 1.0,
             settle_time: 0.3,
             standoff: 0.6,
@@ -173,6 +176,30 @@ impl Default for PlannerSettings {
 }
 
 impl PlannerSettings {
+    /// Parse and validate TOML (missing fields take their defaults).
+    ///
+    /// # Errors
+    /// [`SettingsError::Parse`] for malformed TOML or unknown fields, otherwise the first bad
+    /// value.
+    pub fn from_toml_str(text: &str) -> Result<Self, SettingsError> {
+        let s: Self = toml::from_str(text).map_err(|e| SettingsError::Parse(e.to_string()))?;
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// The settings as TOML.
+    #[must_use]
+    pub fn to_toml_string(&self) -> String {
+        toml::to_string(self).expect("settings serialise")
+    }
+
+    /// Time (s) the bullet takes to close a longitudinal distance `d` (m) on the target.
+    #[must_use]
+    pub fn closing_time(&self, d: f64) -> f64 {
+        let d = d.abs();
+        (d / self.approach_speed).min(1.5 + d / self.approach_speed_far)
+    }
+
     /// Steps of the rollout.
     #[must_use]
     pub fn steps(&self) -> usize {
@@ -201,6 +228,7 @@ impl PlannerSettings {
             ("corridor_fraction", self.corridor_fraction),
             ("trust_force_g", self.trust_force_g),
             ("approach_speed", self.approach_speed),
+            ("approach_speed_far", self.approach_speed_far),
             ("lateral_speed", self.lateral_speed),
             ("heading_tol", self.heading_tol),
             ("stop_decel_fraction", self.stop_decel_fraction),
@@ -258,7 +286,7 @@ impl PlannerSettings {
         if self
             .start_offsets
             .windows(2)
-            .any(|p| !(p[1] > p[0]) || !p[0].is_finite())
+            .any(|p| p[1] <= p[0] || !p[0].is_finite())
             || self.start_offsets.iter().any(|v| !(v.is_finite() && *v >= 0.0))
         {
             return Err(invalid(
@@ -309,6 +337,9 @@ pub struct PhaseSettings {
     pub bullet_clearance_min: f64,
     /// Braking torque of the abort command (fraction of the bullet's drive-torque limit).
     pub abort_brake: f64,
+    /// Consecutive infeasible decisions while chasing before the maneuver is aborted (the
+    /// situation often changes within a replanning period: a curve ends, the target slows).
+    pub infeasible_patience: u32,
 }
 
 impl Default for PhaseSettings {
@@ -326,6 +357,7 @@ impl Default for PhaseSettings {
             monitor_speed: 3.0,
             bullet_clearance_min: 0.2,
             abort_brake: 0.8,
+            infeasible_patience: 3,
         }
     }
 }
@@ -363,6 +395,9 @@ impl PhaseSettings {
         }
         if self.release_gap <= self.contact_gap {
             return Err(invalid("phases.release_gap", "must exceed contact_gap"));
+        }
+        if self.infeasible_patience == 0 {
+            return Err(invalid("phases.infeasible_patience", "must be at least 1"));
         }
         if self.abort_brake > 1.0 {
             return Err(invalid("phases.abort_brake", "must be at most 1"));

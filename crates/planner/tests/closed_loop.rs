@@ -1,6 +1,7 @@
 //! The whole controller on the plant (the truth): a PIT on a straight three-lane road at
-//! 15 m/s from behind either side reverses the target inside the road; the same maneuver
-//! without the upper layer (the paper's ablation) runs through its phases as well.
+//! 15 m/s from behind either side reverses the target, which comes to rest inside the road
+//! (its driver brakes half a second after the contact, as in `picopit simulate`); the same
+//! maneuver without the upper layer (the paper's ablation) runs through its phases as well.
 
 use dynamics::params::ParamSet;
 use dynamics::plant::{Plant, PlantConfig, VehicleInit};
@@ -14,6 +15,7 @@ struct Run {
     phases: Vec<Phase>,
     heading_error: f64,
     lateral: f64,
+    speed: f64,
     abort: Option<planner::AbortReason>,
     plans: usize,
 }
@@ -21,8 +23,10 @@ struct Run {
 fn run(side: f64, upper: bool) -> Run {
     let params = ParamSet::builtin("full_size").unwrap();
     let mu = 0.9;
-    let mut settings = ControllerSettings::default();
-    settings.upper_layer = upper;
+    let mut settings = ControllerSettings {
+        upper_layer: upper,
+        ..ControllerSettings::default()
+    };
     // Wall-clock limits out of the way (an unoptimised build is some 20x slower); the
     // outcome then does not depend on the machine.
     settings.mpc.time_budget = 10.0;
@@ -40,13 +44,21 @@ fn run(side: f64, upper: bool) -> Run {
     );
     let mut phases = vec![Phase::Chasing];
     let mut plans = 0;
+    let mut first_contact: Option<f64> = None;
+    let brake = 0.6 * params.target.brake_torque_max;
     for step in 0..240 {
+        let time = step as f64 * dt;
+        let target_input = match first_contact {
+            Some(t) if time >= t + 0.5 => TargetInput::new(0.0, brake),
+            _ => TargetInput::zeros(),
+        };
+        plant.set_target_command(target_input[0], target_input[1]);
         let out = ctl
             .step(&ControllerInput {
-                time: step as f64 * dt,
+                time,
                 target: plant.target_state(),
                 bullet: plant.bullet_state(),
-                target_input: TargetInput::zeros(),
+                target_input,
                 road: &road,
                 obstacles: &[],
             })
@@ -58,12 +70,16 @@ fn run(side: f64, upper: bool) -> Run {
         }
         plant.set_bullet_command_blended(out.command[0], out.command[1]);
         plant.advance(dt);
+        if first_contact.is_none() && plant.take_contact_average().is_some() {
+            first_contact = Some(time);
+        }
     }
     let xt = plant.target_state();
     Run {
         phases,
         heading_error: wrap(xt[2] - std::f64::consts::PI).abs(),
         lateral: xt[7],
+        speed: xt[0].hypot(xt[1]),
         abort: ctl.abort_reason(),
         plans,
     }
@@ -77,6 +93,7 @@ fn the_controller_reverses_the_target_from_either_side() {
         assert_eq!(&r.phases[..3], &[Phase::Chasing, Phase::Pit, Phase::Stabilising], "side {side}");
         assert!(r.heading_error < 0.35, "side {side}: heading error {:.2} rad", r.heading_error);
         assert!(r.lateral.abs() < 6.25, "side {side}: the target left the road (Y {:.2})", r.lateral);
+        assert!(r.speed < 0.5, "side {side}: the target is still moving at {:.2} m/s", r.speed);
         assert!(r.plans >= 4, "side {side}: {} plans", r.plans);
     }
 }

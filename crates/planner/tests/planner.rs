@@ -152,8 +152,8 @@ fn an_obstacle_where_the_target_would_spin_changes_the_decision_or_aborts() {
 
 #[test]
 fn no_feasible_decision_is_reported_with_its_reason() {
-    // One narrow lane without shoulders: every push that spins the target round takes it
-    // over an edge.
+    // One narrow lane without shoulders: no room for the bullet beside the target, and every
+    // push that spins the target round would take it over an edge.
     let s = PlannerSettings::default();
     let road = Road::straight(3000.0, 1, 3.0, 0.0);
     let lane = road.lane_center_offset(0);
@@ -166,7 +166,7 @@ fn no_feasible_decision_is_reported_with_its_reason() {
     let pkg = p.plan(&input(&road, &[], xt, xb)).unwrap();
     assert_eq!(pkg.mode, Mode::Abort, "{:?}", pkg.infeasible);
     assert_eq!(pkg.infeasible, Some(Infeasible::RoadBoundary));
-    assert!(pkg.candidates > 0 && pkg.feasible_candidates == 0);
+    assert_eq!(pkg.feasible_candidates, 0);
     assert!(!pkg.has_window());
     assert!(!pkg.infeasible.unwrap().describe().is_empty());
 }
