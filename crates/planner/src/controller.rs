@@ -74,6 +74,7 @@ pub enum StepError {
 pub struct PitController {
     settings: ControllerSettings,
     params: ParamSet,
+    mu: f64,
     planner: Planner,
     mpc: CoupledMpc,
     default_pit: DefaultPit,
@@ -121,6 +122,7 @@ impl PitController {
             phases: PhaseMachine::new(settings.phases.clone()),
             default_pit: DefaultPit::new(params, Side::Left),
             params: params.clone(),
+            mu,
             planner,
             mpc,
             last_command: BulletInput::zeros(),
@@ -264,11 +266,19 @@ impl PitController {
             },
             bullet_clearance: clearance,
         };
-        let changed = self.phases.update(&obs);
-        let phase = self.phases.phase();
-        if changed && phase == Phase::Pit {
+        let mut changed = self.phases.update(&obs);
+        if changed && self.phases.phase() == Phase::Pit {
             self.pit_frame = Some(input.target[idx::PSI]);
         }
+        // The push has turned the target far enough: let go before the spinning body swings
+        // back into the bullet (the next touch would be a rebound).
+        if let (Phase::Pit, Some(frame)) = (self.phases.phase(), self.pit_frame) {
+            if wrap(input.target[idx::PSI] - frame).abs() > self.settings.phases.pit_yaw_done {
+                self.phases.stabilise(input.time);
+                changed = true;
+            }
+        }
+        let phase = self.phases.phase();
         // The upper layer: replan on its period and on every phase change.
         let mut replanned = false;
         let mut plan_time = 0.0;
@@ -377,15 +387,19 @@ impl PitController {
     }
 
     /// Controlled braking along the road: steer the bullet's heading onto the road's, brake
-    /// at `abort_brake` of the torque range.
+    /// at `abort_brake` of the road's adhesion (a spun, sliding target decelerates at up to
+    /// μ g: a gentler stop runs the bullet into it).
     fn safe_stop(&self, input: &ControllerInput<'_>) -> BulletInput {
         let xb = &input.bullet;
         let b = &self.params.bullet;
         let road_heading = input.road.project(Vec2::new(xb[0], xb[1])).heading;
         let err = wrap(road_heading - xb[2]);
         let delta = (0.8 * err - 0.1 * xb[5]).clamp(-0.5 * b.steer_max, 0.5 * b.steer_max);
+        // Braking force `abort_brake · μ m g` (all four wheels through the blended brakes:
+        // the rear-axle torque of the same force, negative).
+        let force = self.settings.phases.abort_brake * self.mu * b.mass * 9.81;
         let brake = if xb[3] > 0.2 {
-            -self.settings.phases.abort_brake * b.drive_torque_max.abs().max(b.drive_torque_min.abs())
+            -force * b.wheel_radius / (b.drive_efficiency * b.gear_ratio)
         } else {
             0.0
         };

@@ -355,7 +355,8 @@ impl Planner {
             .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
             .heading;
         // The target reverses without further push (a PIT under way that has done its
-        // work, or a target spinning out by itself): the decision is to stop pushing.
+        // work, or a target spinning out by itself): the decision is to stop pushing. The
+        // package still reports the predicted margins.
         {
             let side = input.side.unwrap_or_else(|| self.bullet_side(input));
             self.setup_candidate(side, self.n, lane);

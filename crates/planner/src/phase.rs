@@ -68,6 +68,7 @@ pub struct PhaseMachine {
     phase: Phase,
     entered: f64,
     contacted: bool,
+    apart_since: Option<f64>,
     abort: Option<AbortReason>,
 }
 
@@ -79,6 +80,7 @@ impl PhaseMachine {
             phase: Phase::Chasing,
             entered: 0.0,
             contacted: false,
+            apart_since: None,
             abort: None,
         }
     }
@@ -88,6 +90,7 @@ impl PhaseMachine {
         self.phase = Phase::Chasing;
         self.entered = time;
         self.contacted = false;
+        self.apart_since = None;
         self.abort = None;
     }
 
@@ -170,7 +173,17 @@ impl PhaseMachine {
             }
             Phase::Pit => {
                 let window_over = o.window.is_some_and(|(_, t1)| o.time > t1 + 0.25);
-                let released = self.contacted && o.gap > s.release_gap;
+                // Released: apart by more than `release_gap` for `release_dwell` after a
+                // contact (a bouncing push does not count; a spinning target is not touched
+                // again: the next touch would be a rebound).
+                if self.contacted && o.gap > s.release_gap {
+                    self.apart_since.get_or_insert(o.time);
+                } else {
+                    self.apart_since = None;
+                }
+                let released = self
+                    .apart_since
+                    .is_some_and(|t| o.time - t >= s.release_dwell - 1e-9);
                 if released || (window_over && o.gap > s.contact_gap) || in_phase > s.pit_timeout
                 {
                     self.enter(Phase::Stabilising, o.time);
@@ -218,7 +231,11 @@ mod tests {
         assert!(m.update(&obs(1.0, 0.0)));
         assert_eq!(m.phase(), Phase::Pit);
         assert!(!m.update(&obs(1.3, -0.02)));
-        assert!(m.update(&obs(1.9, 0.8)));
+        // Apart, but not for long enough: a bouncing push.
+        assert!(!m.update(&obs(1.35, 0.8)));
+        assert!(!m.update(&obs(1.4, 0.0)));
+        assert!(!m.update(&obs(1.45, 0.8)));
+        assert!(m.update(&obs(1.45 + PhaseSettings::default().release_dwell, 0.8)));
         assert_eq!(m.phase(), Phase::Stabilising);
         let mut o = obs(3.0, 5.0);
         o.target_speed = 0.2;

@@ -323,8 +323,12 @@ pub struct PhaseSettings {
     pub stabilise_timeout: f64,
     /// Gap (m) at or below which the vehicles count as in contact.
     pub contact_gap: f64,
-    /// Gap (m) beyond which, after a contact, the PIT counts as over.
+    /// Gap (m) beyond which, held for `release_dwell` (s) after a contact, the PIT counts
+    /// as over.
     pub release_gap: f64,
+    pub release_dwell: f64,
+    /// The PIT ends once the target has turned this far (rad) since the push began.
+    pub pit_yaw_done: f64,
     /// The target counts as settled below this speed (m/s) and yaw rate (rad/s).
     pub settle_speed: f64,
     pub settle_yaw_rate: f64,
@@ -335,7 +339,7 @@ pub struct PhaseSettings {
     pub monitor_speed: f64,
     /// Safety monitor: the bullet's least clearance to an obstacle (m).
     pub bullet_clearance_min: f64,
-    /// Braking torque of the abort command (fraction of the bullet's drive-torque limit).
+    /// Braking of the safe stop (stabilisation, done, abort) as a fraction of μ g.
     pub abort_brake: f64,
     /// Consecutive infeasible decisions while chasing before the maneuver is aborted (the
     /// situation often changes within a replanning period: a curve ends, the target slows).
@@ -349,7 +353,9 @@ impl Default for PhaseSettings {
             pit_timeout: 2.0,
             stabilise_timeout: 10.0,
             contact_gap: 0.05,
-            release_gap: 0.5,
+            release_gap: 0.2,
+            release_dwell: 0.15,
+            pit_yaw_done: 1.05,
             settle_speed: 0.5,
             settle_yaw_rate: 0.1,
             bullet_yaw_rate_max: 1.5,
@@ -373,6 +379,8 @@ impl PhaseSettings {
             ("phases.pit_timeout", self.pit_timeout),
             ("phases.stabilise_timeout", self.stabilise_timeout),
             ("phases.release_gap", self.release_gap),
+            ("phases.release_dwell", self.release_dwell),
+            ("phases.pit_yaw_done", self.pit_yaw_done),
             ("phases.settle_speed", self.settle_speed),
             ("phases.settle_yaw_rate", self.settle_yaw_rate),
             ("phases.bullet_yaw_rate_max", self.bullet_yaw_rate_max),
