@@ -87,8 +87,17 @@ impl Reference {
     }
 }
 
-/// The contact pose of the PIT: the bullet's front corner on the target's side,
-/// `0.3 m` behind the target's rear axle (the rear quarter panel), pushed `overlap` in.
+/// The default contact point's position along the target (its body x, m): `0.3 m` behind
+/// the rear axle (the rear quarter panel), at least `0.2 m` ahead of the rear bumper.
+#[must_use]
+pub fn rear_quarter_x(params: &ParamSet) -> f64 {
+    let t = &params.target;
+    let rear_bumper = -(t.length - t.cg_to_front);
+    (-t.lr - 0.3).max(rear_bumper + 0.2)
+}
+
+/// The contact pose of the PIT: the bullet's front corner on the target's side at the rear
+/// quarter ([`rear_quarter_x`]), pushed `overlap` in.
 #[must_use]
 pub fn pit_stage(
     params: &ParamSet,
@@ -98,12 +107,33 @@ pub fn pit_stage(
     rel_speed: f64,
     fn_corridor: (f64, f64),
 ) -> StageReference {
+    pit_stage_at(
+        params,
+        side,
+        rear_quarter_x(params),
+        contact_angle,
+        overlap,
+        rel_speed,
+        fn_corridor,
+    )
+}
+
+/// The contact pose with the bullet's inner front corner at `x_c` along the target's side
+/// (body x, m), turned into the target by `contact_angle`, pushed `overlap` in.
+#[must_use]
+pub fn pit_stage_at(
+    params: &ParamSet,
+    side: Side,
+    x_c: f64,
+    contact_angle: f64,
+    overlap: f64,
+    rel_speed: f64,
+    fn_corridor: (f64, f64),
+) -> StageReference {
     let t = &params.target;
     let b = &params.bullet;
     let s = side.sign();
     // Contact point on the target's side, in the target frame.
-    let rear_bumper = -(t.length - t.cg_to_front);
-    let x_c = (-t.lr - 0.3).max(rear_bumper + 0.2);
     let p_c = Vec2::new(x_c, s * (0.5 * t.width - overlap));
     // The bullet turned into the target by the contact angle; its inner front corner at p_c.
     let rel_heading = -s * contact_angle;

@@ -30,7 +30,7 @@ use dynamics::target::idx;
 use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
 use mpc::geom::{edge_row, gap_gradient, pair_geometry};
 use mpc::qp::{clarabel_settings, Emitter, Pattern, Qp};
-use mpc::reference::pit_stage;
+use mpc::reference::{pit_stage_at, rear_quarter_x};
 use mpc::{QpStatus, Side};
 
 const GRAVITY: f64 = 9.81;
@@ -83,6 +83,7 @@ pub enum PlannerError {
 struct Outcome {
     side: Side,
     k0: usize,
+    contact_x: f64,
     objective: f64,
     heading_error: f64,
     road_margin: f64,
@@ -130,6 +131,8 @@ pub struct Planner {
     side: Side,
     k0: usize,
     contact_point: Vec2,
+    /// The current candidate's contact point along the target (body x, m).
+    contact_x: f64,
     psi_rev: f64,
     input_u: TargetInput,
     time: f64,
@@ -242,6 +245,7 @@ impl Planner {
             side: Side::Left,
             k0: 0,
             contact_point: Vec2::zeros(),
+            contact_x: rear_quarter_x(params),
             psi_rev: 0.0,
             input_u: TargetInput::zeros(),
             time: 0.0,
@@ -296,17 +300,27 @@ impl Planner {
         &self.package
     }
 
-    /// The bullet's contact pose on `side` (target frame).
+    /// The bullet's contact pose on `side` (target frame) at the current candidate's contact
+    /// point.
     fn contact_pose(&self, side: Side) -> mpc::StageReference {
         let s = &self.settings;
-        pit_stage(
+        pit_stage_at(
             &self.params,
             side,
+            self.contact_x,
             s.contact_angle,
             s.overlap,
             s.push_speed,
             (0.0, self.force_max),
         )
+    }
+
+    /// The contact point's body x for offset `offset` from the rear quarter (clamped to the
+    /// target's side, at least 0.2 m from either bumper).
+    fn contact_x_at(&self, offset: f64) -> f64 {
+        let t = &self.params.target;
+        let rear = -(t.length - t.cg_to_front) + 0.2;
+        (rear_quarter_x(&self.params) + offset).clamp(rear, t.cg_to_front - 0.2)
     }
 
     /// Earliest time (s from now) the bullet can be at its contact pose on `side`: a simple
@@ -334,6 +348,31 @@ impl Planner {
         s.settle_time + s.closing_time(dx).max(dy / s.lateral_speed)
     }
 
+    /// Keep `o` if it is the best feasible candidate so far (or, while none is feasible, the
+    /// best infeasible one), with its forces.
+    fn rank(
+        &mut self,
+        o: Outcome,
+        best: &mut Option<Outcome>,
+        best_any: &mut Option<Outcome>,
+        feasible: &mut u32,
+    ) {
+        let heading_ok = o.heading_error <= self.settings.heading_tol;
+        let tol = self.settings.violation_tol;
+        let road_ok = o.road_margin >= -tol && o.stop_margin >= -tol;
+        let obs_ok = o.clearance >= self.settings.obstacle_clearance - tol;
+        if heading_ok && road_ok && obs_ok {
+            *feasible += 1;
+            if best.is_none_or(|b| o.objective < b.objective) {
+                *best = Some(o);
+                self.best.copy_from_slice(&self.forces);
+            }
+        } else if best.is_none() && best_any.is_none_or(|b| o.objective < b.objective) {
+            *best_any = Some(o);
+            self.best.copy_from_slice(&self.forces);
+        }
+    }
+
     /// Plan from the current state: search the candidates and fill the package.
     ///
     /// # Errors
@@ -350,6 +389,7 @@ impl Planner {
         }
         self.time = input.time;
         self.input_u = input.target_input;
+        self.contact_x = self.contact_x_at(0.0);
         let lane = input
             .road
             .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
@@ -412,22 +452,25 @@ impl Planner {
                     continue;
                 }
                 candidates += 1;
-                let Some(o) = self.evaluate(side, k0, lane, input) else {
+                self.contact_x = self.contact_x_at(0.0);
+                if let Some(o) = self.evaluate(side, k0, lane, input) {
+                    self.rank(o, &mut best, &mut best_any, &mut feasible);
+                }
+            }
+        }
+        // The contact point along the rear quarter: the other offsets, tried on the best
+        // side and window only (one more candidate each).
+        if let Some(o) = best.or(best_any) {
+            for i in 0..self.settings.contact_offsets.len() {
+                let off = self.settings.contact_offsets[i];
+                let x = self.contact_x_at(off);
+                if (x - o.contact_x).abs() < 1e-9 {
                     continue;
-                };
-                let heading_ok = o.heading_error <= self.settings.heading_tol;
-                let tol = self.settings.violation_tol;
-                let road_ok = o.road_margin >= -tol && o.stop_margin >= -tol;
-                let obs_ok = o.clearance >= self.settings.obstacle_clearance - tol;
-                if heading_ok && road_ok && obs_ok {
-                    feasible += 1;
-                    if best.is_none_or(|b| o.objective < b.objective) {
-                        best = Some(o);
-                        self.best.copy_from_slice(&self.forces);
-                    }
-                } else if best.is_none() && best_any.is_none_or(|b| o.objective < b.objective) {
-                    best_any = Some(o);
-                    self.best.copy_from_slice(&self.forces);
+                }
+                candidates += 1;
+                self.contact_x = x;
+                if let Some(c) = self.evaluate(o.side, o.k0, lane, input) {
+                    self.rank(c, &mut best, &mut best_any, &mut feasible);
                 }
             }
         }
@@ -501,6 +544,7 @@ impl Planner {
         }
         self.time = input.time;
         self.input_u = input.target_input;
+        self.contact_x = self.contact_x_at(0.0);
         let lane = input
             .road
             .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
@@ -556,9 +600,7 @@ impl Planner {
         self.side = side;
         self.k0 = k0;
         let t = &self.params.target;
-        let rear = -(t.length - t.cg_to_front);
-        let x_c = (-t.lr - 0.3).max(rear + 0.2);
-        self.contact_point = Vec2::new(x_c, side.sign() * 0.5 * t.width);
+        self.contact_point = Vec2::new(self.contact_x, side.sign() * 0.5 * t.width);
         // Pushing the rear quarter to the right (bullet on the left) yaws the target
         // counter-clockwise: the reversed heading is reached by spinning that way.
         self.psi_rev = lane + side.sign() * std::f64::consts::PI;
@@ -822,6 +864,7 @@ impl Planner {
         Some(Outcome {
             side,
             k0,
+            contact_x: self.contact_x,
             objective: current.0 + delay,
             heading_error: projected_heading_error(
                 &self.xs[self.n],
@@ -898,6 +941,7 @@ impl Planner {
         input: &PlannerInput<'_>,
     ) {
         if let Some(o) = chosen {
+            self.contact_x = o.contact_x;
             self.setup_candidate(o.side, o.k0, lane);
         }
         self.rollout(&input.target, false, false);

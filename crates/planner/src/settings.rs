@@ -83,6 +83,10 @@ pub struct PlannerSettings {
     pub start_offsets: Vec<f64>,
     /// Sides tried: both by default.
     pub try_both_sides: bool,
+    /// Contact points tried along the target's side (m, body x relative to the rear-quarter
+    /// point 0.3 m behind the rear axle; negative is further back), on the best side and
+    /// window.
+    pub contact_offsets: Vec<f64>,
     /// SCP iterations per candidate.
     pub scp_iterations: u32,
     /// The road, obstacle rows are imposed at every `row_stride`-th step (and the last).
@@ -143,6 +147,7 @@ impl Default for PlannerSettings {
             window: 0.6,
             start_offsets: vec![0.0, 0.3],
             try_both_sides: true,
+            contact_offsets: vec![0.0, -0.4],
             scp_iterations: 3,
             row_stride: 2,
             force_max_g: 2.5,
@@ -296,6 +301,15 @@ impl PlannerSettings {
         }
         if self.row_stride == 0 || self.row_stride > self.steps() {
             return Err(invalid("row_stride", "must be in 1..=steps"));
+        }
+        if self.contact_offsets.is_empty()
+            || self.contact_offsets.len() > 4
+            || self.contact_offsets.iter().any(|v| !(v.is_finite() && v.abs() <= 3.0))
+        {
+            return Err(invalid(
+                "contact_offsets",
+                "needs 1 to 4 finite entries within 3 m of the rear quarter",
+            ));
         }
         if self.scp_iterations == 0 || self.scp_iterations > 20 {
             return Err(invalid("scp_iterations", "must be in 1..=20"));

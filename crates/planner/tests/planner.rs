@@ -73,6 +73,14 @@ fn check_consistent(p: &DecisionPackage, s: &PlannerSettings, force_max: f64) {
         }
     }
     if p.mode == Mode::Pit {
+        // The contact point is one of those tried along the rear quarter.
+        let rq = mpc::reference::rear_quarter_x(&params());
+        assert!(
+            s.contact_offsets.iter().any(|o| (p.contact_point.x - (rq + o)).abs() < 1e-9),
+            "contact point {:?}",
+            p.contact_point
+        );
+        assert!((p.contact_point.y.abs() - 0.5 * params().target.width).abs() < 1e-9);
         assert!(p.has_window());
         // The contact window lies inside the look-ahead.
         assert!(p.window.0 >= p.time - 1e-9 && p.window.1 <= p.time + s.horizon + 1e-9, "{:?}", p.window);
