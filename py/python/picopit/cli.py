@@ -497,8 +497,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     ).validate()
     out = Path(args.out) if args.out else Path("runs") / ("bench-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S"))
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    res = bench.run(cfg, progress=not args.no_progress)
+    # The source tree's commit when the run starts (the extension is whatever was last built).
     extra = {"command": _command_line(_ARGV), "created": started, "git_commit": bench.git_commit()}
+    res = bench.run(cfg, progress=not args.no_progress)
     paths = bench.write_outputs(res, cfg, out, extra)
     if args.json:
         bench.write_json(paths["json"], Path(args.json))
