@@ -59,6 +59,8 @@ pub fn fill_reference(
         envelope_lat: pkg.envelope_lat,
     };
     let stand = Vec2::new(contact.rel_pos.x, contact.rel_pos.y + side * s.standoff);
+    // Fully behind the target's rear bumper (the contact station is at its rear quarter).
+    let behind_x = contact.rel_pos.x - 2.5;
     let back = StageReference {
         rel_pos: Vec2::new(
             contact.rel_pos.x - 3.0,
@@ -80,7 +82,16 @@ pub fn fill_reference(
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
                 *st = if tau < t0 - s.turn_in {
-                    approach(rel, stand, time, arrive, tau, s.approach_speed_far)
+                    Approach {
+                        rel,
+                        goal: stand,
+                        time,
+                        arrive,
+                        speed_cap: s.approach_speed_far,
+                        lateral_speed: s.lateral_speed,
+                        behind_x,
+                    }
+                    .stage(tau)
                 } else if tau <= t1 {
                     let (lo, hi) = pkg
                         .step_at(tau.max(t0))
@@ -115,7 +126,16 @@ pub fn fill_reference(
             let arrive = time + s.closing_time(hold.x - rel.x).max(dt);
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
-                *st = approach(rel, hold, time, arrive, tau, s.approach_speed_far);
+                *st = Approach {
+                    rel,
+                    goal: hold,
+                    time,
+                    arrive,
+                    speed_cap: s.approach_speed_far,
+                    lateral_speed: s.lateral_speed,
+                    behind_x,
+                }
+                .stage(tau);
             }
             r.target_heading = pkg.terminal.heading;
             r.target_weight = 0.0;
@@ -128,24 +148,46 @@ pub fn fill_reference(
     }
 }
 
-/// A stage of the approach: from the current relative position `rel` (at `time`) to
-/// `goal` at `arrive`, linearly, then held.
-fn approach(rel: Vec2, goal: Vec2, time: f64, arrive: f64, tau: f64, speed_cap: f64) -> StageReference {
-    let span = (arrive - time).max(1e-3);
-    let a = ((tau - time) / span).clamp(0.0, 1.0);
-    let pos = rel + (goal - rel) * a;
-    let v = if tau < arrive {
-        ((goal.x - rel.x) / span).clamp(-speed_cap, speed_cap)
-    } else {
-        0.0
-    };
-    StageReference {
-        rel_pos: pos,
-        rel_heading: 0.0,
-        rel_speed: v,
-        track: 1.0,
-        fn_lo: 0.0,
-        fn_hi: 0.0,
-        envelope_lat: 1.5,
+/// The approach: from the current relative position `rel` (at `time`) to `goal` at
+/// `arrive` (linearly in x), moving across at no more than `lateral_speed`, and kept behind
+/// `behind_x` while more than a metre off the goal's line (so that a bullet changing lanes
+/// behind the target does not close in on its rear first), then held.
+#[derive(Debug, Clone, Copy)]
+struct Approach {
+    rel: Vec2,
+    goal: Vec2,
+    time: f64,
+    arrive: f64,
+    speed_cap: f64,
+    lateral_speed: f64,
+    behind_x: f64,
+}
+
+impl Approach {
+    /// The stage at time `tau`.
+    fn stage(&self, tau: f64) -> StageReference {
+        let (rel, goal) = (self.rel, self.goal);
+        let span = (self.arrive - self.time).max(1e-3);
+        let a = ((tau - self.time) / span).clamp(0.0, 1.0);
+        let reach = self.lateral_speed * (tau - self.time).max(0.0);
+        let y = rel.y + (goal.y - rel.y).clamp(-reach, reach);
+        let mut x = rel.x + (goal.x - rel.x) * a;
+        if (goal.y - y).abs() > 1.0 {
+            x = x.min(self.behind_x.max(rel.x));
+        }
+        let v = if tau < self.arrive {
+            ((goal.x - rel.x) / span).clamp(-self.speed_cap, self.speed_cap)
+        } else {
+            0.0
+        };
+        StageReference {
+            rel_pos: Vec2::new(x, y),
+            rel_heading: 0.0,
+            rel_speed: v,
+            track: 1.0,
+            fn_lo: 0.0,
+            fn_hi: 0.0,
+            envelope_lat: 1.5,
+        }
     }
 }

@@ -34,11 +34,12 @@ fn main() {
                 ok += usize::from(r.success());
                 wall += r.wall_time;
                 println!(
-                    "{} {:16} {:8} {:>20} at {:5.2} s | herr {:5.2} margin {:6.2} contacts {} | plan {:5.2}/{:5.2} ms ({}) ctrl {:5.2}/{:5.2} ms | {:?} {:?} | fail {} budget {} | wall {:.2} s",
+                    "{} {:16} {:8} {:>20} {:7} at {:5.2} s | herr {:5.2} margin {:6.2} contacts {} | plan {:5.2}/{:5.2} ms ({}) ctrl {:5.2}/{:5.2} ms | {:?} {:?} | fail {} budget {} | wall {:.2} s",
                     r.scenario,
                     sc.category.name(),
                     sc.adhesion.name(),
                     r.metrics.cause.map_or("success", |c| c.name()),
+                    r.metrics.failed_vehicle.map_or(String::new(), |v| format!("{v:?}")),
                     r.metrics.decided_at.unwrap_or(f64::NAN),
                     r.metrics.terminal_heading_error,
                     r.metrics.min_margin,

@@ -191,6 +191,30 @@ pub struct Metrics {
     pub contacts: u32,
     /// Observations made.
     pub observations: u64,
+    /// Which vehicle crossed the edge or hit the obstacle that decided a boundary violation
+    /// or secondary collision (`None` otherwise).
+    #[serde(default)]
+    pub failed_vehicle: Option<Party>,
+}
+
+/// A vehicle of the episode (for [`Metrics::failed_vehicle`]).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Party {
+    Bullet,
+    Target,
+    Both,
+}
+
+impl Party {
+    fn of(bullet: bool, target: bool) -> Option<Self> {
+        match (bullet, target) {
+            (true, true) => Some(Self::Both),
+            (true, false) => Some(Self::Bullet),
+            (false, true) => Some(Self::Target),
+            (false, false) => None,
+        }
+    }
 }
 
 /// What the monitor needs of one control step. [`Monitor::observe_plant`] fills it from a
@@ -323,6 +347,7 @@ impl Monitor {
                 secondary_collision: false,
                 contacts: 0,
                 observations: 0,
+                failed_vehicle: None,
             },
         })
     }
@@ -473,11 +498,18 @@ impl Monitor {
         // Margins: road edges and obstacles, both vehicles.
         let mut edge = f64::INFINITY;
         let mut obstacle = f64::INFINITY;
-        for fp in &obs.footprints {
-            edge = edge.min(self.road.edge_distance(fp));
+        let mut over = [false; 2];
+        let mut touching = [false; 2];
+        for (i, fp) in obs.footprints.iter().enumerate() {
+            let e = self.road.edge_distance(fp);
+            edge = edge.min(e);
+            over[i] = e < 0.0;
             for o in &self.obstacles {
-                obstacle = obstacle.min(obb_signed_distance(fp, &o.footprint_at(t)));
+                let d = obb_signed_distance(fp, &o.footprint_at(t));
+                obstacle = obstacle.min(d);
+                touching[i] |= d < 0.0;
             }
+            touching[i] |= obs.obstacle_contact[i] || self.latched_obstacle[i];
         }
         self.metrics.min_margin = self.metrics.min_margin.min(edge.min(obstacle));
         let boundary = edge < 0.0;
@@ -492,12 +524,14 @@ impl Monitor {
         self.metrics.terminal_heading_error = err;
 
         if boundary {
+            self.metrics.failed_vehicle = Party::of(over[0], over[1]);
             return self.decide(Outcome::Failure {
                 cause: FailureCause::BoundaryViolation,
                 time: t,
             });
         }
         if hit {
+            self.metrics.failed_vehicle = Party::of(touching[0], touching[1]);
             return self.decide(Outcome::Failure {
                 cause: FailureCause::SecondaryCollision,
                 time: t,

@@ -102,6 +102,7 @@ fn a_footprint_over_the_edge_is_a_boundary_violation() {
     }
     let me = m.metrics();
     assert!(me.boundary_violation && !me.success && me.min_margin < 0.0);
+    assert_eq!(me.failed_vehicle, Some(sim::outcome::Party::Target));
     // Frozen after the decision.
     let after = m.observe(&obs(3.0, 50.0, 0.0, PI, 0.0, 0.0));
     assert_eq!(after, Status::Done(o));
@@ -132,6 +133,7 @@ fn touching_an_obstacle_is_a_secondary_collision() {
         m.observe(&ob),
         Status::Done(Outcome::Failure { cause: FailureCause::SecondaryCollision, .. })
     ));
+    assert_eq!(m.metrics().failed_vehicle, Some(sim::outcome::Party::Bullet));
 }
 
 #[test]

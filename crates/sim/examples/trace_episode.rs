@@ -1,0 +1,23 @@
+//! Trace one episode of the dataset step by step (both vehicles relative to the road, the
+//! phase, the command and the contact force), then its metrics.
+//!
+//! `cargo run --release -p picopit-sim --example trace_episode -- ID [CONFIG]`
+use sim::episode::{run_episode, EpisodeConfig};
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let id = &args[0];
+    let mut cfg = EpisodeConfig::parse(args.get(1).map_or("picopinn", String::as_str)).unwrap();
+    cfg.record = true;
+    let scenarios = sim::load_jsonl("data/scenarios.jsonl").unwrap();
+    let sc = scenarios.iter().find(|s| &s.id == id).unwrap();
+    let road = sc.build_road().unwrap();
+    let r = run_episode(sc, &cfg, 0).unwrap();
+    for s in r.trajectory.iter().step_by(2) {
+        let ft = road.project(dynamics::geometry::Vec2::new(s.target[6], s.target[7]));
+        let fb = road.project(dynamics::geometry::Vec2::new(s.bullet[0], s.bullet[1]));
+        println!("t={:5.2} {:?} T: d={:5.2} ψ-h={:6.1}° v={:5.2} | B: d={:5.2} ψ-h={:6.1}° v={:5.2} | cmd ({:6.3},{:7.1}) Fn={:6.0}",
+            s.time, s.phase, ft.d, (s.target[2]-ft.heading).to_degrees(), s.target[0].hypot(s.target[1]),
+            fb.d, (s.bullet[2]-fb.heading).to_degrees(), s.bullet[3], s.command[0], s.command[1], s.contact_force[0]);
+    }
+    println!("{:?} half width {:.2}", r.metrics, road.half_width());
+}
