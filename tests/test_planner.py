@@ -261,7 +261,7 @@ def closed_loop(ctl: _core.PitController, steps: int):
     for k in range(steps):
         out = ctl.step(k * dt, plant.target_state(), plant.bullet_state())
         outs.append(out)
-        plant.set_commands(float(out["command"][0]), float(out["command"][1]))
+        plant.set_bullet_command_blended(float(out["command"][0]), float(out["command"][1]))
         plant.advance(dt)
     return outs, plant
 
@@ -316,4 +316,11 @@ def test_without_the_upper_layer_there_is_no_package():
     for o in outs:
         assert o["mode"] is None and not o["replanned"] and o["plan_time"] == 0.0
         assert np.all(np.isfinite(o["command"]))
-    assert _core.PitController().package() is not None
+    # With the upper layer: no package until the first plan, one after it.
+    on = _core.PitController()
+    on.set_straight_road()
+    assert on.package() is None
+    closed_loop(on, 1)
+    assert on.package() is not None
+    on.reset()
+    assert on.package() is None

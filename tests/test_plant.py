@@ -167,3 +167,20 @@ def test_advance_releases_the_gil():
     in_middle = sum(1 for t in ticks if mid_lo <= t <= mid_hi)
     # With the GIL held the main thread could not run at all in the middle of the call.
     assert in_middle > 100, f"main thread ran {in_middle} times during advance()"
+
+
+def test_blended_bullet_command_brakes_on_all_wheels_and_refuses_non_finite() -> None:
+    """A negative T_r through the blended command decelerates the bullet with the force the
+    drivetrain mapping gives it (service brakes), a positive one drives like set_commands."""
+    speeds = {}
+    for torque in (-300.0, 0.0):
+        p = picopit.Plant("full_size", mu=0.9)
+        p.reset([0, 0, 0, 15.0, 0, 0], [100, 0, 0, 15.0, 0, 0])
+        p.set_bullet_command_blended(0.0, torque)
+        p.advance(1.0)
+        speeds[torque] = p.bullet_state()[3]
+    # Rolling resistance and drag alone slow the bullet by well under 1 m/s in a second;
+    # 300 N m at the rear axle through the brakes is about 3 kN on 1.1 t: ~2.5 m/s more.
+    assert speeds[0.0] - speeds[-300.0] > 1.5, speeds
+    with pytest.raises(ValueError, match="torque"):
+        p.set_bullet_command_blended(0.0, float("nan"))

@@ -89,6 +89,16 @@ impl Plant {
         Ok(())
     }
 
+    /// The bullet command as the controllers plan it, `[δ_f, T_r]`: a positive T_r drives
+    /// the rear axle, a negative one is blended into the service brakes of all four wheels
+    /// with the same total force (what `CoupledMpc` and `PitController` commands mean).
+    fn set_bullet_command_blended(&mut self, steer: f64, torque: f64) -> PyResult<()> {
+        let s = finite(steer, "steer")?;
+        let t = finite(torque, "torque")?;
+        self.inner.set_bullet_command_blended(s, t);
+        Ok(())
+    }
+
     /// Simulate `duration` seconds (the GIL is released meanwhile).
     fn advance(&mut self, py: Python<'_>, duration: f64) -> PyResult<()> {
         if !(duration.is_finite() && (0.0..=MAX_ADVANCE).contains(&duration)) {

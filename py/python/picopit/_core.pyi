@@ -75,6 +75,10 @@ class Plant:
         T_r (N m, negative brakes through the drivetrain); target front steer (rad), brake
         torque (N m, >= 0); bullet service brake (N m, >= 0). The plant applies actuator
         limits, rate limits and lags."""
+    def set_bullet_command_blended(self, steer: float, torque: float) -> None:
+        """The bullet command as the controllers plan it, ``[δ_f, T_r]``: a positive T_r
+        drives the rear axle, a negative one is blended into the service brakes of all four
+        wheels with the same total force."""
     def advance(self, duration: float) -> None:
         """Simulate ``duration`` seconds (rounded to whole steps, at most 1e5 s); the GIL is
         released meanwhile."""
