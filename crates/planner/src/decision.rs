@@ -459,8 +459,10 @@ impl Planner {
             }
         }
         // The contact point along the rear quarter: the other offsets, tried on the best
-        // side and window only (one more candidate each).
-        if let Some(o) = best.or(best_any) {
+        // side and window only (one more candidate each); not while in contact, where the
+        // contact point is wherever the bullet touches.
+        let touching = self.gap(&input.target, &input.bullet) < 0.1;
+        if let Some(o) = best.or(best_any).filter(|_| !touching) {
             for i in 0..self.settings.contact_offsets.len() {
                 let off = self.settings.contact_offsets[i];
                 let x = self.contact_x_at(off);
