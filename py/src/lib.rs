@@ -18,8 +18,8 @@ use pyo3::prelude::*;
 mod bench;
 mod models;
 mod mpc;
-mod plant;
 mod planner;
+mod plant;
 mod sim;
 mod surrogate;
 
@@ -29,6 +29,56 @@ pyo3::create_exception!(
     PyValueError,
     "A parameter set or parameter file that cannot be used; the message names the field."
 );
+
+/// An `(n, C)` float array, checked (shape, finiteness) and copied. Errors are messages that
+/// name `name`; each binding raises them as its own exception.
+pub(crate) fn table<const C: usize>(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+) -> Result<Vec<[f64; C]>, String> {
+    let arr = obj
+        .extract::<PyArrayLikeDyn<'_, f64, AllowTypeChange>>()
+        .map_err(|e| format!("{name}: expected a float array ({e})"))?;
+    let view = arr.as_array();
+    let shape = view.shape().to_vec();
+    if shape.len() != 2 || shape[1] != C {
+        return Err(format!("{name}: expected shape (n, {C}), got {shape:?}"));
+    }
+    let mut rows = vec![[0.0; C]; shape[0]];
+    for (ix, v) in view.indexed_iter() {
+        let (i, j) = (ix[0], ix[1]);
+        if !v.is_finite() {
+            return Err(format!("{name}[{i}, {j}] = {v}: must be finite"));
+        }
+        rows[i][j] = *v;
+    }
+    Ok(rows)
+}
+
+/// Obstacles from an `(n, 7)` array of `[x, y, heading, vx, vy, length, width]`, each
+/// validated (the message names `obstacles[i].field`).
+pub(crate) fn obstacles_arg(
+    obj: &Bound<'_, PyAny>,
+) -> Result<Vec<dynamics::road::Obstacle>, String> {
+    table::<7>(obj, "obstacles")?
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let o = dynamics::road::Obstacle {
+                x: r[0],
+                y: r[1],
+                heading: r[2],
+                vx: r[3],
+                vy: r[4],
+                length: r[5],
+                width: r[6],
+            };
+            o.validate()
+                .map(|()| o)
+                .map_err(|e| e.within(&format!("obstacles[{i}]")).to_string())
+        })
+        .collect()
+}
 
 /// Map the core's parameter error onto the Python exception.
 pub(crate) fn param_err(e: &dynamics::ParamError) -> PyErr {

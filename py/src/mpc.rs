@@ -10,7 +10,7 @@ use dynamics::target4dof::FourDofTarget;
 use dynamics::{TargetInput, TargetModel};
 use mpc::reference::DefaultPit;
 use mpc::{CoupledMpc as CoreMpc, MpcInput, MpcSettings, Reference, Side};
-use numpy::{AllowTypeChange, PyArray1, PyArray2, PyArrayLikeDyn};
+use numpy::{PyArray1, PyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -25,30 +25,6 @@ pyo3::create_exception!(
 
 fn mpc_err(e: impl std::fmt::Display) -> PyErr {
     MpcError::new_err(e.to_string())
-}
-
-/// A (rows, cols) float array, copied, finite, with `cols` fixed.
-fn table(obj: &Bound<'_, PyAny>, name: &str, cols: usize) -> PyResult<Vec<Vec<f64>>> {
-    let arr = obj
-        .extract::<PyArrayLikeDyn<'_, f64, AllowTypeChange>>()
-        .map_err(|e| PyValueError::new_err(format!("{name}: expected a float array ({e})")))?;
-    let view = arr.as_array();
-    let shape = view.shape().to_vec();
-    if shape.len() != 2 || shape[1] != cols {
-        return Err(PyValueError::new_err(format!(
-            "{name}: expected shape (n, {cols}), got {shape:?}"
-        )));
-    }
-    let mut rows = vec![vec![0.0; cols]; shape[0]];
-    for ((i, j), v) in view.indexed_iter().map(|(ix, v)| ((ix[0], ix[1]), *v)) {
-        if !v.is_finite() {
-            return Err(PyValueError::new_err(format!(
-                "{name}[{i}, {j}] = {v}: must be finite"
-            )));
-        }
-        rows[i][j] = v;
-    }
-    Ok(rows)
 }
 
 /// The per-step arguments of `solve` and `evaluate`, checked and copied.
@@ -252,22 +228,7 @@ impl PyCoupledMpc {
     /// Obstacles as an (n, 7) array of `[x, y, heading, vx, vy, length, width]` (the centre
     /// at time 0 and a constant world velocity).
     fn set_obstacles(&mut self, obstacles: &Bound<'_, PyAny>) -> PyResult<()> {
-        let rows = table(obstacles, "obstacles", 7)?;
-        let mut out = Vec::with_capacity(rows.len());
-        for (i, r) in rows.iter().enumerate() {
-            let o = Obstacle {
-                x: r[0],
-                y: r[1],
-                heading: r[2],
-                vx: r[3],
-                vy: r[4],
-                length: r[5],
-                width: r[6],
-            };
-            o.validate()
-                .map_err(|e| mpc_err(e.within(&format!("obstacles[{i}]"))))?;
-            out.push(o);
-        }
+        let out = crate::obstacles_arg(obstacles).map_err(MpcError::new_err)?;
         self.obstacles = out;
         Ok(())
     }
@@ -304,7 +265,7 @@ impl PyCoupledMpc {
         target_heading: f64,
         target_weight: f64,
     ) -> PyResult<()> {
-        let rows = table(stages, "stages", 8)?;
+        let rows = crate::table::<8>(stages, "stages").map_err(PyValueError::new_err)?;
         let n = self.core.settings().horizon;
         if rows.len() != n {
             return Err(MpcError::new_err(format!(
@@ -499,8 +460,8 @@ impl PyCoupledMpc {
     ) -> PyResult<(f64, f64)> {
         let args = StepArgs::parse(target, bullet, target_input, last_command, time)?;
         let n = self.core.settings().horizon;
-        let u_rows = table(u, "u", 2)?;
-        let f_rows = table(f, "f", 2)?;
+        let u_rows = crate::table::<2>(u, "u").map_err(PyValueError::new_err)?;
+        let f_rows = crate::table::<2>(f, "f").map_err(PyValueError::new_err)?;
         if u_rows.len() != n || f_rows.len() != n {
             return Err(MpcError::new_err(format!(
                 "u, f: expected {n} rows (the horizon), got {} and {}",

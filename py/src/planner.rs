@@ -12,7 +12,7 @@ use dynamics::target4dof::FourDofTarget;
 use dynamics::{TargetInput, TargetModel};
 use mpc::Side;
 use nalgebra::SVector;
-use numpy::{AllowTypeChange, PyArray1, PyArrayLikeDyn, PyArrayMethods};
+use numpy::{PyArray1, PyArrayMethods};
 use planner::{
     AbortReason, ControllerInput, ControllerSettings, DecisionPackage, Infeasible, Mode, Phase,
     PitController as CoreController, Planner as CorePlanner, PlannerInput, PlannerSettings,
@@ -198,27 +198,12 @@ impl Scene {
     }
 
     fn set_obstacles(&mut self, obstacles: &Bound<'_, PyAny>) -> PyResult<()> {
-        let rows = table::<7>(obstacles, "obstacles")?;
-        if rows.len() > MAX_OBSTACLES {
+        let out = crate::obstacles_arg(obstacles).map_err(PlannerError::new_err)?;
+        if out.len() > MAX_OBSTACLES {
             return Err(PlannerError::new_err(format!(
                 "obstacles: {} rows, at most {MAX_OBSTACLES}",
-                rows.len()
+                out.len()
             )));
-        }
-        let mut out = Vec::with_capacity(rows.len());
-        for (i, r) in rows.iter().enumerate() {
-            let o = Obstacle {
-                x: r[0],
-                y: r[1],
-                heading: r[2],
-                vx: r[3],
-                vy: r[4],
-                length: r[5],
-                width: r[6],
-            };
-            o.validate()
-                .map_err(|e| plan_err(e.within(&format!("obstacles[{i}]"))))?;
-            out.push(o);
         }
         self.obstacles = out;
         Ok(())
@@ -229,31 +214,6 @@ impl Scene {
             PlannerError::new_err("no road: call set_straight_road() or set_road() first")
         })
     }
-}
-
-/// A (rows, cols) float array, copied, finite, with `cols` fixed.
-fn table<const C: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<[f64; C]>> {
-    let arr = obj
-        .extract::<PyArrayLikeDyn<'_, f64, AllowTypeChange>>()
-        .map_err(|e| PlannerError::new_err(format!("{name}: expected a float array ({e})")))?;
-    let view = arr.as_array();
-    let shape = view.shape().to_vec();
-    if shape.len() != 2 || shape[1] != C {
-        return Err(PlannerError::new_err(format!(
-            "{name}: expected shape (n, {C}), got {shape:?}"
-        )));
-    }
-    let mut rows = vec![[0.0; C]; shape[0]];
-    for (ix, v) in view.indexed_iter() {
-        let (i, j) = (ix[0], ix[1]);
-        if !v.is_finite() {
-            return Err(PlannerError::new_err(format!(
-                "{name}[{i}, {j}] = {v}: must be finite"
-            )));
-        }
-        rows[i][j] = *v;
-    }
-    Ok(rows)
 }
 
 /// The per-call state arguments, checked and copied.

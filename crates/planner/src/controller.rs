@@ -236,7 +236,11 @@ impl PitController {
             self.infeasible_count = 0;
             self.phases.reset(input.time);
             let rel = crate::href::relative_position(&input.target, &input.bullet);
-            let side = if rel.y >= 0.0 { Side::Left } else { Side::Right };
+            let side = if rel.y >= 0.0 {
+                Side::Left
+            } else {
+                Side::Right
+            };
             self.default_pit = DefaultPit::new(&self.params, side);
         }
         let (fb, ft) = self.footprints(&input.target, &input.bullet);
@@ -252,7 +256,9 @@ impl PitController {
         let obs = PhaseObservation {
             time: input.time,
             gap,
-            mode: upper.then_some(pkg.mode).filter(|_| self.next_replan.is_finite()),
+            mode: upper
+                .then_some(pkg.mode)
+                .filter(|_| self.next_replan.is_finite()),
             infeasible: pkg.infeasible,
             window: (upper && pkg.has_window()).then_some(pkg.window),
             target_speed: input.target[idx::VX].hypot(input.target[idx::VY]),
@@ -328,10 +334,6 @@ impl PitController {
             plan_time = self.clock.now() - tp;
         }
         let phase = self.phases.phase();
-        let lane = input
-            .road
-            .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
-            .heading;
         let mut mpc_status = None;
         let command = if phase.is_active() {
             let dt = self.settings.mpc.dt;
@@ -349,6 +351,10 @@ impl PitController {
                     },
                 );
             } else {
+                let lane = input
+                    .road
+                    .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
+                    .heading;
                 self.default_pit.fill(
                     &mut self.reference,
                     input.target.as_slice(),
