@@ -38,7 +38,10 @@ fn parse_config(config: &str, models_dir: Option<&str>) -> Result<EpisodeConfig,
 /// The benchmark's preset configuration names.
 #[pyfunction]
 fn episode_presets() -> Vec<String> {
-    EpisodeConfig::PRESETS.iter().map(|s| (*s).to_owned()).collect()
+    EpisodeConfig::PRESETS
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect()
 }
 
 /// The resolved configuration (preset name or JSON) as a dict; raises EpisodeError naming

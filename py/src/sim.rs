@@ -2,12 +2,12 @@
 //! lines, screen a scenario on the plant, and the road geometry the generator needs. The
 //! GIL is released around file reading, validation and simulation.
 
+use ::sim::scenario::{RoadDef, Scenario, ScenarioError as CoreError};
+use ::sim::screen::{screen, ScreenSettings};
 use numpy::{AllowTypeChange, PyArray2, PyArrayLikeDyn};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use ::sim::scenario::{RoadDef, Scenario, ScenarioError as CoreError};
-use ::sim::screen::{screen, ScreenSettings};
 
 pyo3::create_exception!(
     picopit,
@@ -84,7 +84,10 @@ fn scenario_initial_states<'py>(py: Python<'py>, text: &str) -> PyResult<Bound<'
     let sc = Scenario::from_json_line(text, 1).map_err(|e| scenario_err(&e))?;
     let road = sc.build_road().map_err(|e| scenario_err(&e))?;
     let d = PyDict::new(py);
-    d.set_item("bullet", numpy::PyArray1::from_slice(py, &sc.bullet_state(&road)))?;
+    d.set_item(
+        "bullet",
+        numpy::PyArray1::from_slice(py, &sc.bullet_state(&road)),
+    )?;
     d.set_item(
         "target",
         numpy::PyArray1::from_slice(py, sc.target_state(&road).as_slice()),
@@ -102,8 +105,8 @@ fn road_poses<'py>(
     s: &Bound<'py, PyAny>,
     d: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let def: RoadDef = serde_json::from_str(road)
-        .map_err(|e| ScenarioError::new_err(format!("road: {e}")))?;
+    let def: RoadDef =
+        serde_json::from_str(road).map_err(|e| ScenarioError::new_err(format!("road: {e}")))?;
     let built = def.build().map_err(|e| scenario_err(&e))?;
     let floats = |obj: &Bound<'py, PyAny>, name: &str| -> PyResult<Vec<f64>> {
         let arr = obj
@@ -111,7 +114,9 @@ fn road_poses<'py>(
             .map_err(|e| PyValueError::new_err(format!("{name}: expected a float array ({e})")))?;
         let v: Vec<f64> = arr.as_array().iter().copied().collect();
         if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
-            return Err(PyValueError::new_err(format!("{name}[{i}] = {x}: must be finite")));
+            return Err(PyValueError::new_err(format!(
+                "{name}[{i}] = {x}: must be finite"
+            )));
         }
         Ok(v)
     };

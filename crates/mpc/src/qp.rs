@@ -281,7 +281,9 @@ impl Qp {
 
     /// Set the per-solve time limit (s).
     pub fn set_time_limit(&mut self, limit: f64) {
-        self.deadline.limit.store(limit.to_bits(), Ordering::Relaxed);
+        self.deadline
+            .limit
+            .store(limit.to_bits(), Ordering::Relaxed);
     }
 
     /// Push the current values into the solver and solve (within the time limit given at
@@ -315,7 +317,9 @@ impl Qp {
         if let Some(t) = self.solver.timers.as_mut() {
             t.start_as_current(OUTER_TIMER);
             let start = t.total_time().as_secs_f64();
-            self.deadline.start.store(start.to_bits(), Ordering::Relaxed);
+            self.deadline
+                .start
+                .store(start.to_bits(), Ordering::Relaxed);
         }
         self.solver.solve();
         if let Some(t) = self.solver.timers.as_mut() {

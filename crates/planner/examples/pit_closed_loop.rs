@@ -11,7 +11,12 @@ use dynamics::target4dof::FourDofTarget;
 use dynamics::{TargetInput, TargetModel};
 use planner::{ControllerInput, ControllerSettings, Phase, PitController};
 
-fn model(path: Option<&str>, params: &ParamSet, mu: f64, dt: f64) -> Box<dyn TargetModel + Send + Sync> {
+fn model(
+    path: Option<&str>,
+    params: &ParamSet,
+    mu: f64,
+    dt: f64,
+) -> Box<dyn TargetModel + Send + Sync> {
     match path {
         Some(p) => Box::new(
             pico_nn::SurrogateModel::from_path(std::path::Path::new(p))
@@ -25,8 +30,16 @@ fn model(path: Option<&str>, params: &ParamSet, mu: f64, dt: f64) -> Box<dyn Tar
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let upper = !args.iter().any(|a| a == "no-upper");
-    let path = args.iter().position(|a| a == "model").map(|i| args[i + 1].as_str());
-    let env = |k: &str, d: f64| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
+    let path = args
+        .iter()
+        .position(|a| a == "model")
+        .map(|i| args[i + 1].as_str());
+    let env = |k: &str, d: f64| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
     let mu = env("MU", 0.9);
     let vt = env("VT", 15.0);
     let params = ParamSet::builtin("full_size").unwrap();
@@ -46,10 +59,31 @@ fn main() {
     .unwrap();
     let road = Road::straight(3000.0, 3, 3.5, 1.0);
     let lane = road.lane_center_offset(1);
-    let mut plant = Plant::new(&params, PlantConfig { mu, ..PlantConfig::default() }).unwrap();
+    let mut plant = Plant::new(
+        &params,
+        PlantConfig {
+            mu,
+            ..PlantConfig::default()
+        },
+    )
+    .unwrap();
     plant.reset(
-        &VehicleInit { x: 100.0 + env("RX", -10.0), y: lane + env("RY", 3.0), yaw: 0.0, vx: vt + env("DV", 2.0), vy: 0.0, r: 0.0 },
-        &VehicleInit { x: 100.0, y: lane, yaw: 0.0, vx: vt, vy: 0.0, r: 0.0 },
+        &VehicleInit {
+            x: 100.0 + env("RX", -10.0),
+            y: lane + env("RY", 3.0),
+            yaw: 0.0,
+            vx: vt + env("DV", 2.0),
+            vy: 0.0,
+            r: 0.0,
+        },
+        &VehicleInit {
+            x: 100.0,
+            y: lane,
+            yaw: 0.0,
+            vx: vt,
+            vy: 0.0,
+            r: 0.0,
+        },
     );
     let mut last_phase = Phase::Chasing;
     let mut peak: f64 = 0.0;

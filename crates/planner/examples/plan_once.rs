@@ -9,8 +9,15 @@ use dynamics::{TargetInput, TargetState};
 use planner::{Planner, PlannerInput, PlannerSettings};
 
 fn main() {
-    let a: Vec<f64> = std::env::args().skip(1).map(|v| v.parse().unwrap()).collect();
-    let (rx, ry, vt, vb) = if a.len() == 4 { (a[0], a[1], a[2], a[3]) } else { (-6.0, 2.5, 15.0, 17.0) };
+    let a: Vec<f64> = std::env::args()
+        .skip(1)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let (rx, ry, vt, vb) = if a.len() == 4 {
+        (a[0], a[1], a[2], a[3])
+    } else {
+        (-6.0, 2.5, 15.0, 17.0)
+    };
     let params = ParamSet::builtin("full_size").unwrap();
     let mu = 0.9;
     let s = PlannerSettings::default();
@@ -22,7 +29,14 @@ fn main() {
     xt[0] = vt;
     xt[6] = 100.0;
     xt[7] = lane;
-    let xb = dynamics::bullet::BulletState::from_column_slice(&[100.0 + rx, lane + ry, 0.0, vb, 0.0, 0.0]);
+    let xb = dynamics::bullet::BulletState::from_column_slice(&[
+        100.0 + rx,
+        lane + ry,
+        0.0,
+        vb,
+        0.0,
+        0.0,
+    ]);
     let input = PlannerInput {
         time: 0.0,
         target: xt,
@@ -42,7 +56,10 @@ fn main() {
     let pkg = p.package().clone();
     times.sort_by(f64::total_cmp);
     println!("{p:?}");
-    println!("plan: median {:.2} ms, min {:.2} ms (20 runs)", times[200], times[0]);
+    println!(
+        "plan: median {:.2} ms, min {:.2} ms (20 runs)",
+        times[200], times[0]
+    );
     println!(
         "mode {:?} {:?} side {:?} window {:?} cands {}/{} obj {:.3} head_err {:.3} road {:.2} clear {:.2} stop {:.2}",
         pkg.mode, pkg.infeasible, pkg.side, pkg.window, pkg.feasible_candidates, pkg.candidates,

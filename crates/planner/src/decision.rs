@@ -499,14 +499,14 @@ impl Planner {
             Some(Infeasible::RoadBoundary)
         } else if best.is_none() && candidates > 0 {
             Some(match best_any {
-            None => Infeasible::Numerical,
-            Some(o) if o.clearance < self.settings.obstacle_clearance + BINDING => {
-                Infeasible::ObstacleClearance
-            }
-            Some(o) if o.road_margin < BINDING || o.stop_margin < BINDING => {
-                Infeasible::RoadBoundary
-            }
-            Some(_) => Infeasible::TerminalSetUnreachable,
+                None => Infeasible::Numerical,
+                Some(o) if o.clearance < self.settings.obstacle_clearance + BINDING => {
+                    Infeasible::ObstacleClearance
+                }
+                Some(o) if o.road_margin < BINDING || o.stop_margin < BINDING => {
+                    Infeasible::RoadBoundary
+                }
+                Some(_) => Infeasible::TerminalSetUnreachable,
             })
         } else {
             None
@@ -573,8 +573,13 @@ impl Planner {
     /// rear quarter: the road margin of that pose's outer edge (negative: over the edge).
     fn side_room(&self, side: Side, input: &PlannerInput<'_>) -> f64 {
         let c = self.contact_pose(side);
-        let pose = Pose2::new(input.target[idx::X], input.target[idx::Y], input.target[idx::PSI]);
-        let outer = c.rel_pos.y + side.sign() * (self.settings.standoff + 0.5 * self.params.bullet.width);
+        let pose = Pose2::new(
+            input.target[idx::X],
+            input.target[idx::Y],
+            input.target[idx::PSI],
+        );
+        let outer =
+            c.rel_pos.y + side.sign() * (self.settings.standoff + 0.5 * self.params.bullet.width);
         let p = pose.world_from_body(Vec2::new(c.rel_pos.x, outer));
         input.road.half_width() - input.road.project(p).d.abs()
     }
@@ -587,10 +592,22 @@ impl Planner {
     /// The side the bullet works on when no candidate decides it: the side it is on, unless
     /// the road leaves no room there and does on the other side.
     fn bullet_side(&self, input: &PlannerInput<'_>) -> Side {
-        let rel = Pose2::new(input.target[idx::X], input.target[idx::Y], input.target[idx::PSI])
-            .body_from_world(Vec2::new(input.bullet[0], input.bullet[1]));
-        let own = if rel.y >= 0.0 { Side::Left } else { Side::Right };
-        let other = if own == Side::Left { Side::Right } else { Side::Left };
+        let rel = Pose2::new(
+            input.target[idx::X],
+            input.target[idx::Y],
+            input.target[idx::PSI],
+        )
+        .body_from_world(Vec2::new(input.bullet[0], input.bullet[1]));
+        let own = if rel.y >= 0.0 {
+            Side::Left
+        } else {
+            Side::Right
+        };
+        let other = if own == Side::Left {
+            Side::Right
+        } else {
+            Side::Left
+        };
         if !self.side_open(own, input) && self.side_open(other, input) {
             other
         } else {
@@ -808,7 +825,13 @@ impl Planner {
         let stop_margin = self.stop_row.1;
         pen += (-stop_margin).max(0.0);
         let objective = j + w.penalty * pen;
-        (objective, wrap(h).abs(), road_margin, clearance, stop_margin)
+        (
+            objective,
+            wrap(h).abs(),
+            road_margin,
+            clearance,
+            stop_margin,
+        )
     }
 
     /// Optimise the forces of one candidate; `None` if the rollout or the QP fails.
@@ -893,7 +916,11 @@ impl Planner {
             for &lv in &LEVELS[1..] {
                 let f = (lv * top).min(self.force_max);
                 for (j, t) in self.trial.iter_mut().enumerate() {
-                    *t = if j < m { Vec2::new(f, 0.0) } else { Vec2::zeros() };
+                    *t = if j < m {
+                        Vec2::new(f, 0.0)
+                    } else {
+                        Vec2::zeros()
+                    };
                 }
                 self.rollout(&input.target, true, false);
                 self.linearise_rows(input.road, input.obstacles);
@@ -905,7 +932,11 @@ impl Planner {
         }
         let (_, f, m) = best;
         for (j, t) in self.forces.iter_mut().enumerate() {
-            *t = if j < m { Vec2::new(f, 0.0) } else { Vec2::zeros() };
+            *t = if j < m {
+                Vec2::new(f, 0.0)
+            } else {
+                Vec2::zeros()
+            };
         }
     }
 
@@ -989,7 +1020,9 @@ impl Planner {
             let corridor = if in_window {
                 (
                     0.5 * f.x,
-                    (1.5 * f.x).max(f.x + 0.1 * self.force_max).min(hi_comfort.max(f.x)),
+                    (1.5 * f.x)
+                        .max(f.x + 0.1 * self.force_max)
+                        .min(hi_comfort.max(f.x)),
                 )
             } else {
                 (0.0, 0.0)
@@ -1096,7 +1129,13 @@ impl DummyRows {
 
 /// The QP in the scaled force steps y = δF / S: one code path writes the pattern (at
 /// construction) and the values (every iteration), every entry unconditionally.
-fn assemble(v: &RowsView<'_>, ep: &mut Emitter<'_>, ea: &mut Emitter<'_>, q: &mut [f64], b: &mut [f64]) {
+fn assemble(
+    v: &RowsView<'_>,
+    ep: &mut Emitter<'_>,
+    ea: &mut Emitter<'_>,
+    q: &mut [f64],
+    b: &mut [f64],
+) {
     let l = v.l;
     let s = v.s;
     let w = &s.weights;
@@ -1147,13 +1186,21 @@ fn assemble(v: &RowsView<'_>, ep: &mut Emitter<'_>, ea: &mut Emitter<'_>, q: &mu
             let fj = if d == 0 { f.x } else { f.y };
             let prev = if j > 0 {
                 let p = v.forces[j - 1] / v.scale;
-                if d == 0 { p.x } else { p.y }
+                if d == 0 {
+                    p.x
+                } else {
+                    p.y
+                }
             } else {
                 0.0
             };
             let next = if j + 1 < l.w {
                 let p = v.forces[j + 1] / v.scale;
-                if d == 0 { p.x } else { p.y }
+                if d == 0 {
+                    p.x
+                } else {
+                    p.y
+                }
             } else {
                 0.0
             };

@@ -45,7 +45,11 @@ pub fn fill_reference(
     xb: &BulletState,
     at: Timing,
 ) {
-    let Timing { time, dt, pit_frame } = at;
+    let Timing {
+        time,
+        dt,
+        pit_frame,
+    } = at;
     let rel = relative_position(xt, xb);
     let psi_now = xt[idx::PSI];
     let side = pkg.side.sign();
@@ -93,9 +97,7 @@ pub fn fill_reference(
                     }
                     .stage(tau)
                 } else if tau <= t1 {
-                    let (lo, hi) = pkg
-                        .step_at(tau.max(t0))
-                        .map_or((0.0, 0.0), |p| p.corridor);
+                    let (lo, hi) = pkg.step_at(tau.max(t0)).map_or((0.0, 0.0), |p| p.corridor);
                     // The contact pose is held in the target's frame as it was when the
                     // push began (`pit_frame`): the bullet follows the target's c.g. but
                     // not its rotation, so it keeps its heading and pushes on while the

@@ -19,8 +19,12 @@ pub mod package;
 pub mod phase;
 pub mod settings;
 
-pub use controller::{ControllerError, ControllerInput, ControllerOutput, PitController, StepError};
+pub use controller::{
+    ControllerError, ControllerInput, ControllerOutput, PitController, StepError,
+};
 pub use decision::{PlanError, Planner, PlannerError, PlannerInput, MAX_OBSTACLES};
 pub use package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 pub use phase::{AbortReason, Phase, PhaseMachine, PhaseObservation};
-pub use settings::{ControllerSettings, PhaseSettings, PlanWeights, PlannerSettings, SettingsError};
+pub use settings::{
+    ControllerSettings, PhaseSettings, PlanWeights, PlannerSettings, SettingsError,
+};

@@ -184,14 +184,13 @@ impl PhaseMachine {
                 let released = self
                     .apart_since
                     .is_some_and(|t| o.time - t >= s.release_dwell - 1e-9);
-                if released || (window_over && o.gap > s.contact_gap) || in_phase > s.pit_timeout
-                {
+                if released || (window_over && o.gap > s.contact_gap) || in_phase > s.pit_timeout {
                     self.enter(Phase::Stabilising, o.time);
                 }
             }
             Phase::Stabilising => {
-                let settled = o.target_speed < s.settle_speed
-                    && o.target_yaw_rate.abs() < s.settle_yaw_rate;
+                let settled =
+                    o.target_speed < s.settle_speed && o.target_yaw_rate.abs() < s.settle_yaw_rate;
                 if settled || in_phase > s.stabilise_timeout {
                     self.enter(Phase::Done, o.time);
                 }
@@ -278,8 +277,15 @@ mod tests {
         o.mode = Some(Mode::Abort);
         o.infeasible = Some(Infeasible::RoadBoundary);
         m.update(&o);
-        assert_eq!(m.phase(), Phase::Chasing, "an infeasible package alone does not abort");
-        m.abort(AbortReason::DecisionInfeasible(Infeasible::RoadBoundary), 0.6);
+        assert_eq!(
+            m.phase(),
+            Phase::Chasing,
+            "an infeasible package alone does not abort"
+        );
+        m.abort(
+            AbortReason::DecisionInfeasible(Infeasible::RoadBoundary),
+            0.6,
+        );
         assert_eq!(
             m.abort_reason(),
             Some(AbortReason::DecisionInfeasible(Infeasible::RoadBoundary))

@@ -292,7 +292,10 @@ impl PlannerSettings {
             .start_offsets
             .windows(2)
             .any(|p| p[1] <= p[0] || !p[0].is_finite())
-            || self.start_offsets.iter().any(|v| !(v.is_finite() && *v >= 0.0))
+            || self
+                .start_offsets
+                .iter()
+                .any(|v| !(v.is_finite() && *v >= 0.0))
         {
             return Err(invalid(
                 "start_offsets",
@@ -304,7 +307,10 @@ impl PlannerSettings {
         }
         if self.contact_offsets.is_empty()
             || self.contact_offsets.len() > 4
-            || self.contact_offsets.iter().any(|v| !(v.is_finite() && v.abs() <= 3.0))
+            || self
+                .contact_offsets
+                .iter()
+                .any(|v| !(v.is_finite() && v.abs() <= 3.0))
         {
             return Err(invalid(
                 "contact_offsets",
@@ -517,7 +523,9 @@ mod tests {
             ("[mpc]\nhorizon = 1", "horizon"),
         ];
         for (text, field) in cases {
-            let e = ControllerSettings::from_toml_str(text).unwrap_err().to_string();
+            let e = ControllerSettings::from_toml_str(text)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains(field), "{text:?} gave {e:?}");
         }
         let e = ControllerSettings::from_toml_str("[planner]\nhorizn = 2.0")

@@ -62,10 +62,31 @@ fn the_controller_step_allocates_nothing() {
         length: 4.5,
         width: 1.8,
     }];
-    let mut plant = Plant::new(&params, PlantConfig { mu, ..PlantConfig::default() }).unwrap();
+    let mut plant = Plant::new(
+        &params,
+        PlantConfig {
+            mu,
+            ..PlantConfig::default()
+        },
+    )
+    .unwrap();
     plant.reset(
-        &VehicleInit { x: 94.0, y: lane + 2.6, yaw: 0.0, vx: 17.0, vy: 0.0, r: 0.0 },
-        &VehicleInit { x: 100.0, y: lane, yaw: 0.0, vx: 15.0, vy: 0.0, r: 0.0 },
+        &VehicleInit {
+            x: 94.0,
+            y: lane + 2.6,
+            yaw: 0.0,
+            vx: 17.0,
+            vy: 0.0,
+            r: 0.0,
+        },
+        &VehicleInit {
+            x: 100.0,
+            y: lane,
+            yaw: 0.0,
+            vx: 15.0,
+            vy: 0.0,
+            r: 0.0,
+        },
     );
     let (mut replans, mut phases) = (0, Vec::new());
     for step in 0..70 {
@@ -80,7 +101,11 @@ fn the_controller_step_allocates_nothing() {
         let before = allocations();
         let out = ctl.step(&input).unwrap();
         let n = allocations() - before;
-        assert_eq!(n, 0, "step {step} ({:?}, replanned {}): {n} allocations", out.phase, out.replanned);
+        assert_eq!(
+            n, 0,
+            "step {step} ({:?}, replanned {}): {n} allocations",
+            out.phase, out.replanned
+        );
         replans += usize::from(out.replanned);
         if phases.last() != Some(&out.phase) {
             phases.push(out.phase);

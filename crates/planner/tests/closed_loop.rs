@@ -37,10 +37,31 @@ fn run(side: f64, upper: bool) -> Run {
     let mut ctl = PitController::new(&params, mu, model(), model(), settings).unwrap();
     let road = Road::straight(3000.0, 3, 3.5, 1.0);
     let lane = road.lane_center_offset(1);
-    let mut plant = Plant::new(&params, PlantConfig { mu, ..PlantConfig::default() }).unwrap();
+    let mut plant = Plant::new(
+        &params,
+        PlantConfig {
+            mu,
+            ..PlantConfig::default()
+        },
+    )
+    .unwrap();
     plant.reset(
-        &VehicleInit { x: 90.0, y: lane + side * 3.0, yaw: 0.0, vx: 17.0, vy: 0.0, r: 0.0 },
-        &VehicleInit { x: 100.0, y: lane, yaw: 0.0, vx: 15.0, vy: 0.0, r: 0.0 },
+        &VehicleInit {
+            x: 90.0,
+            y: lane + side * 3.0,
+            yaw: 0.0,
+            vx: 17.0,
+            vy: 0.0,
+            r: 0.0,
+        },
+        &VehicleInit {
+            x: 100.0,
+            y: lane,
+            yaw: 0.0,
+            vx: 15.0,
+            vy: 0.0,
+            r: 0.0,
+        },
     );
     let mut phases = vec![Phase::Chasing];
     let mut plans = 0;
@@ -90,10 +111,26 @@ fn the_controller_reverses_the_target_from_either_side() {
     for side in [1.0, -1.0] {
         let r = run(side, true);
         assert_eq!(r.abort, None, "side {side}: {:?}", r.phases);
-        assert_eq!(&r.phases[..3], &[Phase::Chasing, Phase::Pit, Phase::Stabilising], "side {side}");
-        assert!(r.heading_error < 0.35, "side {side}: heading error {:.2} rad", r.heading_error);
-        assert!(r.lateral.abs() < 6.25, "side {side}: the target left the road (Y {:.2})", r.lateral);
-        assert!(r.speed < 0.5, "side {side}: the target is still moving at {:.2} m/s", r.speed);
+        assert_eq!(
+            &r.phases[..3],
+            &[Phase::Chasing, Phase::Pit, Phase::Stabilising],
+            "side {side}"
+        );
+        assert!(
+            r.heading_error < 0.35,
+            "side {side}: heading error {:.2} rad",
+            r.heading_error
+        );
+        assert!(
+            r.lateral.abs() < 6.25,
+            "side {side}: the target left the road (Y {:.2})",
+            r.lateral
+        );
+        assert!(
+            r.speed < 0.5,
+            "side {side}: the target is still moving at {:.2} m/s",
+            r.speed
+        );
         assert!(r.plans >= 4, "side {side}: {} plans", r.plans);
     }
 }
@@ -102,5 +139,10 @@ fn the_controller_reverses_the_target_from_either_side() {
 fn without_the_upper_layer_the_maneuver_still_runs_its_phases() {
     let r = run(1.0, false);
     assert_eq!(r.plans, 0);
-    assert_eq!(&r.phases[..2], &[Phase::Chasing, Phase::Pit], "{:?}", r.phases);
+    assert_eq!(
+        &r.phases[..2],
+        &[Phase::Chasing, Phase::Pit],
+        "{:?}",
+        r.phases
+    );
 }

@@ -38,7 +38,12 @@ fn states(road: &Road, rx: f64, ry: f64, vt: f64, vb: f64) -> (TargetState, Bull
     (xt, xb)
 }
 
-fn input<'a>(road: &'a Road, obstacles: &'a [Obstacle], xt: TargetState, xb: BulletState) -> PlannerInput<'a> {
+fn input<'a>(
+    road: &'a Road,
+    obstacles: &'a [Obstacle],
+    xt: TargetState,
+    xb: BulletState,
+) -> PlannerInput<'a> {
     PlannerInput {
         time: 3.0,
         target: xt,
@@ -59,10 +64,18 @@ fn check_consistent(p: &DecisionPackage, s: &PlannerSettings, force_max: f64) {
     }
     assert!((p.steps[0].time - p.time).abs() < 1e-12);
     // The terminal set contains the reversed heading of the lane (heading 0 here).
-    assert!((wrap(p.terminal.heading - std::f64::consts::PI)).abs() < 1e-9, "{:?}", p.terminal);
+    assert!(
+        (wrap(p.terminal.heading - std::f64::consts::PI)).abs() < 1e-9,
+        "{:?}",
+        p.terminal
+    );
     for st in &p.steps {
         let f = st.force;
-        assert!(f.x >= -1e-6 && f.x <= force_max + 1e-6, "F_n {} outside [0, {force_max}]", f.x);
+        assert!(
+            f.x >= -1e-6 && f.x <= force_max + 1e-6,
+            "F_n {} outside [0, {force_max}]",
+            f.x
+        );
         assert!(f.y.abs() <= s.friction * f.x + 1e-6, "friction cone: {f:?}");
         assert!(st.corridor.0 <= st.corridor.1 + 1e-9);
         assert!(st.corridor.1 <= force_max + 1e-6);
@@ -76,21 +89,30 @@ fn check_consistent(p: &DecisionPackage, s: &PlannerSettings, force_max: f64) {
         // The contact point is one of those tried along the rear quarter.
         let rq = mpc::reference::rear_quarter_x(&params());
         assert!(
-            s.contact_offsets.iter().any(|o| (p.contact_point.x - (rq + o)).abs() < 1e-9),
+            s.contact_offsets
+                .iter()
+                .any(|o| (p.contact_point.x - (rq + o)).abs() < 1e-9),
             "contact point {:?}",
             p.contact_point
         );
         assert!((p.contact_point.y.abs() - 0.5 * params().target.width).abs() < 1e-9);
         assert!(p.has_window());
         // The contact window lies inside the look-ahead.
-        assert!(p.window.0 >= p.time - 1e-9 && p.window.1 <= p.time + s.horizon + 1e-9, "{:?}", p.window);
+        assert!(
+            p.window.0 >= p.time - 1e-9 && p.window.1 <= p.time + s.horizon + 1e-9,
+            "{:?}",
+            p.window
+        );
         assert!(p.predicted_heading_error <= s.heading_tol + 1e-9);
         assert!(p.predicted_road_margin >= -s.violation_tol);
         assert!(p.predicted_stop_margin >= -s.violation_tol);
         // The safety set keeps clear of the obstacles.
         assert!(p.predicted_clearance >= s.obstacle_clearance - s.violation_tol);
         assert!(p.infeasible.is_none());
-        assert!(p.steps.iter().any(|st| st.force.x > 0.0), "a PIT with no force");
+        assert!(
+            p.steps.iter().any(|st| st.force.x > 0.0),
+            "a PIT with no force"
+        );
     }
 }
 
@@ -110,13 +132,21 @@ fn the_package_is_consistent_on_scripted_situations() {
     for (rx, ry, vt, vb, mode) in cases {
         let (xt, xb) = states(&road, rx, ry, vt, vb);
         let pkg = p.plan(&input(&road, &[], xt, xb)).unwrap().clone();
-        assert_eq!(pkg.mode, mode, "case ({rx}, {ry}): {:?} {:?}", pkg.mode, pkg.infeasible);
+        assert_eq!(
+            pkg.mode, mode,
+            "case ({rx}, {ry}): {:?} {:?}",
+            pkg.mode, pkg.infeasible
+        );
         check_consistent(&pkg, &s, force_max);
         if mode == Mode::Pit {
             // The side the bullet is on, the target spun towards its reversal.
             assert_eq!(pkg.side.sign(), ry.signum(), "case ({rx}, {ry})");
             let last = pkg.steps.last().unwrap().target;
-            assert!(last[2] * ry.signum() > 1.0, "the target should be spinning: ψ_N {}", last[2]);
+            assert!(
+                last[2] * ry.signum() > 1.0,
+                "the target should be spinning: ψ_N {}",
+                last[2]
+            );
         }
     }
 }
@@ -155,7 +185,10 @@ fn an_obstacle_where_the_target_would_spin_changes_the_decision_or_aborts() {
         Mode::Abort => assert_eq!(with.infeasible, Some(Infeasible::ObstacleClearance)),
         m => panic!("unexpected mode {m:?}"),
     }
-    assert!(free.predicted_clearance > 100.0, "no obstacle, no clearance limit");
+    assert!(
+        free.predicted_clearance > 100.0,
+        "no obstacle, no clearance limit"
+    );
 }
 
 #[test]
@@ -215,7 +248,15 @@ fn bad_input_is_an_error_not_a_panic() {
         planner::PlanError::NonFiniteState
     );
     let many = vec![
-        Obstacle { x: 0.0, y: 50.0, heading: 0.0, vx: 0.0, vy: 0.0, length: 1.0, width: 1.0 };
+        Obstacle {
+            x: 0.0,
+            y: 50.0,
+            heading: 0.0,
+            vx: 0.0,
+            vy: 0.0,
+            length: 1.0,
+            width: 1.0
+        };
         planner::MAX_OBSTACLES + 1
     ];
     let (xt, xb) = states(&road, -6.0, 2.5, 15.0, 17.0);

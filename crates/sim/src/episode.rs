@@ -95,7 +95,11 @@ impl ModelKind {
             Self::Pinn => "pinn",
             Self::PicoPinn => "picopinn",
         };
-        Some(models_dir.join(params.name()).join(format!("{stem}.safetensors")))
+        Some(
+            models_dir
+                .join(params.name())
+                .join(format!("{stem}.safetensors")),
+        )
     }
 }
 
@@ -149,7 +153,10 @@ impl Uncertainty {
             ("uncertainty.torque_gain", self.torque_gain, 0.5),
         ] {
             if !(value.is_finite() && (0.0..=max).contains(&value)) {
-                return Err(config_err(field, format!("{value}: must lie in [0, {max}]")));
+                return Err(config_err(
+                    field,
+                    format!("{value}: must lie in [0, {max}]"),
+                ));
             }
         }
         Ok(())
@@ -383,10 +390,32 @@ pub struct Sample {
 impl Sample {
     /// Column names of [`Sample::row`].
     pub const COLUMNS: [&'static str; 26] = [
-        "time", "target_vx", "target_vy", "target_psi", "target_r", "target_p", "target_phi",
-        "target_x", "target_y", "bullet_x", "bullet_y", "bullet_psi", "bullet_vx", "bullet_vy",
-        "bullet_r", "cmd_steer", "cmd_torque", "target_steer", "target_brake", "contact_fn",
-        "contact_ft", "phase", "replanned", "plan_ms", "ctrl_ms", "decided",
+        "time",
+        "target_vx",
+        "target_vy",
+        "target_psi",
+        "target_r",
+        "target_p",
+        "target_phi",
+        "target_x",
+        "target_y",
+        "bullet_x",
+        "bullet_y",
+        "bullet_psi",
+        "bullet_vx",
+        "bullet_vy",
+        "bullet_r",
+        "cmd_steer",
+        "cmd_torque",
+        "target_steer",
+        "target_brake",
+        "contact_fn",
+        "contact_ft",
+        "phase",
+        "replanned",
+        "plan_ms",
+        "ctrl_ms",
+        "decided",
     ];
 
     /// The sample as numbers in [`Sample::COLUMNS`] order (phase as its index: chasing 0,
@@ -516,7 +545,10 @@ fn load_model(
     params: &ParamSet,
     dt: f64,
 ) -> Result<Box<dyn TargetModel + Send + Sync>, EpisodeError> {
-    let path = match (&config.model_path, config.model.file(&config.models_dir, sc.params)) {
+    let path = match (
+        &config.model_path,
+        config.model.file(&config.models_dir, sc.params),
+    ) {
         (_, None) => return Ok(Box::new(FourDofTarget::new(&params.target, sc.mu, dt))),
         (Some(p), Some(_)) => p.clone(),
         (None, Some(p)) => p,
@@ -552,9 +584,10 @@ impl Sensor {
 
     /// The delayed states (the oldest kept sample).
     fn read(&self) -> (TargetState, [f64; 6]) {
-        self.buf.front().copied().unwrap_or_else(|| {
-            unreachable!("the sensor buffer always holds the initial sample")
-        })
+        self.buf
+            .front()
+            .copied()
+            .unwrap_or_else(|| unreachable!("the sensor buffer always holds the initial sample"))
     }
 }
 

@@ -13,7 +13,9 @@ pub mod outcome;
 pub mod scenario;
 pub mod screen;
 
-pub use episode::{run_episode, ClockKind, EpisodeConfig, EpisodeError, EpisodeResult, ModelKind, Uncertainty};
+pub use episode::{
+    run_episode, ClockKind, EpisodeConfig, EpisodeError, EpisodeResult, ModelKind, Uncertainty,
+};
 pub use outcome::{FailureCause, JudgeSettings, Metrics, Monitor, Observation, Outcome, Status};
 pub use scenario::{load_jsonl, parse_jsonl, Scenario, ScenarioError, TargetDriver};
 pub use screen::{screen, ScreenReport, ScreenSettings, Verdict};

@@ -266,9 +266,7 @@ impl ContactTracker {
                 self.episodes += 1;
                 let stab = stabilising_since.or(self.first_ended);
                 let in_stabilisation = stab.is_some_and(|ts| t >= ts);
-                if in_stabilisation
-                    && closing > settings.rebound_speed
-                    && self.unsafe_at.is_none()
+                if in_stabilisation && closing > settings.rebound_speed && self.unsafe_at.is_none()
                 {
                     self.unsafe_at = Some(t);
                 }

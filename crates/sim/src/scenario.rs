@@ -75,7 +75,9 @@ impl ScenarioError {
     #[must_use]
     pub fn at_line(self, line: usize) -> Self {
         match self {
-            Self::Syntax { column, message, .. } => Self::Syntax {
+            Self::Syntax {
+                column, message, ..
+            } => Self::Syntax {
                 line,
                 column,
                 message,
@@ -299,7 +301,10 @@ impl RoadDef {
                     return Err(ScenarioError::field(
                         line,
                         f("radius"),
-                        format!("{r}: |radius| must be at least max(10 m, the road's width {:.2} m)", 2.0 * hw),
+                        format!(
+                            "{r}: |radius| must be at least max(10 m, the road's width {:.2} m)",
+                            2.0 * hw
+                        ),
                     ));
                 }
                 let arc = self.arc_length();
@@ -307,7 +312,10 @@ impl RoadDef {
                     return Err(ScenarioError::field(
                         line,
                         f("length"),
-                        format!("{}: must exceed 2·entry + 2·transition (the arc would be {arc} m)", self.length),
+                        format!(
+                            "{}: must exceed 2·entry + 2·transition (the arc would be {arc} m)",
+                            self.length
+                        ),
                     ));
                 }
                 let turn = (arc + self.transition) / r.abs();
@@ -561,10 +569,18 @@ impl Scenario {
     /// [`ScenarioError::Field`] naming the first bad field.
     pub fn validate(&self, line: usize) -> Result<(), ScenarioError> {
         if self.id.is_empty() || self.id.len() > 64 {
-            return Err(ScenarioError::field(line, "id", "must have 1 to 64 characters"));
+            return Err(ScenarioError::field(
+                line,
+                "id",
+                "must have 1 to 64 characters",
+            ));
         }
         if self.prior.len() > 64 {
-            return Err(ScenarioError::field(line, "prior", "must have at most 64 characters"));
+            return Err(ScenarioError::field(
+                line,
+                "prior",
+                "must have at most 64 characters",
+            ));
         }
         self.road.check(line)?;
         match (self.category.is_straight(), self.road.radius) {
@@ -602,7 +618,10 @@ impl Scenario {
             return Err(ScenarioError::field(
                 line,
                 "obstacles",
-                format!("{} obstacles: at most {MAX_OBSTACLES}", self.obstacles.len()),
+                format!(
+                    "{} obstacles: at most {MAX_OBSTACLES}",
+                    self.obstacles.len()
+                ),
             ));
         }
         for (i, o) in self.obstacles.iter().enumerate() {
@@ -616,7 +635,9 @@ impl Scenario {
                     format!("obstacles[{i}].body.{field}"),
                     format!("{value}: {reason}"),
                 ),
-                other => ScenarioError::field(line, format!("obstacles[{i}].body"), other.to_string()),
+                other => {
+                    ScenarioError::field(line, format!("obstacles[{i}].body"), other.to_string())
+                }
             })?;
             for (name, v) in [("length", o.body.length), ("width", o.body.width)] {
                 if v > 50.0 {
@@ -642,13 +663,19 @@ impl Scenario {
                 return Err(ScenarioError::field(
                     line,
                     format!("{name}.d"),
-                    format!("{}: off the road (|d| must be below the half width {hw})", v.d),
+                    format!(
+                        "{}: off the road (|d| must be below the half width {hw})",
+                        v.d
+                    ),
                 ));
             }
         }
         self.driver.check(line, hw)?;
         range(line, "t_max", self.t_max, 1.0, 120.0)?;
-        if !(self.eps_psi.is_finite() && self.eps_psi > 0.0 && self.eps_psi <= std::f64::consts::FRAC_PI_2) {
+        if !(self.eps_psi.is_finite()
+            && self.eps_psi > 0.0
+            && self.eps_psi <= std::f64::consts::FRAC_PI_2)
+        {
             return Err(ScenarioError::field(
                 line,
                 "eps_psi",
@@ -844,7 +871,11 @@ fn finite(line: usize, field: &str, v: f64) -> Result<(), ScenarioError> {
     if v.is_finite() {
         Ok(())
     } else {
-        Err(ScenarioError::field(line, field, format!("{v}: must be finite")))
+        Err(ScenarioError::field(
+            line,
+            field,
+            format!("{v}: must be finite"),
+        ))
     }
 }
 

@@ -120,7 +120,12 @@ impl ScreenReport {
 }
 
 fn footprint(init: &VehicleInit, length: f64, width: f64, cg_to_front: f64) -> Obb {
-    Obb::vehicle_footprint(&Pose2::new(init.x, init.y, init.yaw), length, width, cg_to_front)
+    Obb::vehicle_footprint(
+        &Pose2::new(init.x, init.y, init.yaw),
+        length,
+        width,
+        cg_to_front,
+    )
 }
 
 /// The geometry rules. `Err` carries the broken rule.
@@ -270,7 +275,8 @@ pub fn screen(sc: &Scenario, settings: &ScreenSettings) -> Result<ScreenReport, 
         }
     } else if let Some(ts) = t_stop {
         report.verdict = Verdict::Trivial;
-        report.reason = format!("target_stops: alone it comes to rest inside the road at {ts:.2} s");
+        report.reason =
+            format!("target_stops: alone it comes to rest inside the road at {ts:.2} s");
     } else if t_reach + settings.pit_lead + settings.spin_time > sc.t_max {
         report.verdict = Verdict::Impossible;
         report.reason = format!(

@@ -46,7 +46,11 @@ fn a_target_steered_off_the_road_is_a_boundary_violation_and_the_episode_stops_t
     let t = r.metrics.decided_at.unwrap();
     assert!(t < 3.0, "decided at {t}");
     // Stopped at the decision, not at T_max.
-    assert!((r.sim_time - t).abs() < 1e-9, "sim {} decided {t}", r.sim_time);
+    assert!(
+        (r.sim_time - t).abs() < 1e-9,
+        "sim {} decided {t}",
+        r.sim_time
+    );
     assert_eq!(r.trajectory.len() as u64, r.control_steps);
     assert!((r.trajectory.last().unwrap().time - t).abs() < 1e-9);
     assert_eq!(r.model, "4dof");
@@ -115,20 +119,33 @@ fn config_error(text: &str) -> (String, String) {
 #[test]
 fn configuration_errors_name_the_field() {
     assert_eq!(config_error(r#"{"model": "5dof"}"#).0, "model");
-    assert_eq!(config_error(r#"{"uncertainty": {"latency": "long"}}"#).0, "uncertainty.latency");
-    assert_eq!(config_error(r#"{"uncertainty": {"latency": 5.0}}"#).0, "uncertainty.latency");
-    assert_eq!(config_error(r#"{"uncertainty": {"noise": 1.0}}"#).0, "uncertainty.noise");
+    assert_eq!(
+        config_error(r#"{"uncertainty": {"latency": "long"}}"#).0,
+        "uncertainty.latency"
+    );
+    assert_eq!(
+        config_error(r#"{"uncertainty": {"latency": 5.0}}"#).0,
+        "uncertainty.latency"
+    );
+    assert_eq!(
+        config_error(r#"{"uncertainty": {"noise": 1.0}}"#).0,
+        "uncertainty.noise"
+    );
     let (field, message) = config_error(r#"{"modle": "pinn"}"#);
     assert_eq!(field, "modle");
     assert!(message.contains("unknown field"), "{message}");
     assert_eq!(config_error(r#"{"clock": "sundial"}"#).0, "clock");
     assert_eq!(config_error(r#"{"clock_tick": 0.0}"#).0, "clock_tick");
-    let (field, message) = config_error(r#"{"preset": "picopinn", "controller": {"mpc": {"dt": -1.0}}}"#);
+    let (field, message) =
+        config_error(r#"{"preset": "picopinn", "controller": {"mpc": {"dt": -1.0}}}"#);
     assert_eq!(field, "controller");
     assert!(message.contains("dt"), "{message}");
     let (field, message) = config_error("picopinn_upper");
     assert_eq!(field, "preset");
-    assert!(message.contains("picopinn_no_upper"), "lists the known names: {message}");
+    assert!(
+        message.contains("picopinn_no_upper"),
+        "lists the known names: {message}"
+    );
     assert_eq!(config_error(r#"{"preset": 3}"#).0, "preset");
     assert_eq!(config_error("{not json").0, "(document)");
 }
@@ -140,13 +157,19 @@ fn presets_and_overrides() {
         assert_eq!(c.name, name);
         assert_eq!(c.controller.upper_layer, name != "picopinn_no_upper");
     }
-    assert_eq!(EpisodeConfig::parse("4dof").unwrap().model, ModelKind::FourDof);
+    assert_eq!(
+        EpisodeConfig::parse("4dof").unwrap().model,
+        ModelKind::FourDof
+    );
     let c = EpisodeConfig::parse(
         r#"{"preset": "picopinn_no_upper", "name": "noisy", "uncertainty": {"latency": 0.05}}"#,
     )
     .unwrap();
     assert_eq!(c.name, "noisy");
-    assert!(!c.controller.upper_layer, "the preset's controller settings survive the merge");
+    assert!(
+        !c.controller.upper_layer,
+        "the preset's controller settings survive the merge"
+    );
     assert_eq!(c.uncertainty.latency, 0.05);
     assert_eq!(c.model, ModelKind::PicoPinn);
 }
@@ -158,7 +181,11 @@ fn a_missing_model_file_is_an_error_naming_it() {
     cfg.models_dir = PathBuf::from("/nonexistent/models");
     match run_episode(&sc, &cfg, 0) {
         Err(EpisodeError::Model { path, .. }) => {
-            assert!(path.ends_with("full_size/pinn.safetensors"), "{}", path.display());
+            assert!(
+                path.ends_with("full_size/pinn.safetensors"),
+                "{}",
+                path.display()
+            );
         }
         other => panic!("expected a model error, got {other:?}"),
     }

@@ -34,7 +34,14 @@ fn monitor_steps_allocate_nothing() {
     let sc = Scenario::from_json_line(&common::curved().to_string(), 1).unwrap();
     let params = sc.params.load().unwrap();
     let road = sc.build_road().unwrap();
-    let mut plant = Plant::new(&params, PlantConfig { mu: sc.mu, ..PlantConfig::default() }).unwrap();
+    let mut plant = Plant::new(
+        &params,
+        PlantConfig {
+            mu: sc.mu,
+            ..PlantConfig::default()
+        },
+    )
+    .unwrap();
     plant.set_obstacles(sc.obstacles());
     let (b, t) = sc.initial_states(&road);
     plant.reset(&b, &t);

@@ -75,7 +75,10 @@ fn either_direction_of_spin_counts_but_a_wrong_heading_does_not() {
     let o = run_until_done(&mut m, |t| obs(t, 50.0, 0.0, PI / 2.0, 0.0, 0.0));
     assert_eq!(
         o,
-        Outcome::Failure { cause: FailureCause::NoTermination, time: 10.0 }
+        Outcome::Failure {
+            cause: FailureCause::NoTermination,
+            time: 10.0
+        }
     );
     assert!((m.metrics().terminal_heading_error - PI / 2.0).abs() < 1e-9);
 }
@@ -84,7 +87,13 @@ fn either_direction_of_spin_counts_but_a_wrong_heading_does_not() {
 fn reversed_but_still_sliding_is_not_success() {
     let mut m = monitor(vec![]);
     let o = run_until_done(&mut m, |t| obs(t, 50.0 - 1.0 * t, 0.0, PI, 1.0, 0.0));
-    assert!(matches!(o, Outcome::Failure { cause: FailureCause::NoTermination, .. }));
+    assert!(matches!(
+        o,
+        Outcome::Failure {
+            cause: FailureCause::NoTermination,
+            ..
+        }
+    ));
 }
 
 #[test]
@@ -114,16 +123,39 @@ fn a_rotated_footprint_crossing_the_edge_is_caught_by_its_corner() {
     let mut m = monitor(vec![]);
     // c.g. at y = 5.0 (1.25 m inside), yawed 60°: the front corner reaches past y = 6.25.
     let st = m.observe(&obs(DT, 50.0, 5.0, PI / 3.0, 5.0, 0.0));
-    assert!(matches!(st, Status::Done(Outcome::Failure { cause: FailureCause::BoundaryViolation, .. })));
+    assert!(matches!(
+        st,
+        Status::Done(Outcome::Failure {
+            cause: FailureCause::BoundaryViolation,
+            ..
+        })
+    ));
 }
 
 #[test]
 fn touching_an_obstacle_is_a_secondary_collision() {
-    let parked = Obstacle { x: 60.0, y: 0.0, heading: 0.0, vx: 0.0, vy: 0.0, length: 4.5, width: 1.8 };
+    let parked = Obstacle {
+        x: 60.0,
+        y: 0.0,
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    };
     let mut m = monitor(vec![parked]);
     // The target rolls toward the parked car at 5 m/s from x = 40.
     let o = run_until_done(&mut m, |t| obs(t, 40.0 + 5.0 * t, 0.0, 0.0, 5.0, 0.0));
-    assert!(matches!(o, Outcome::Failure { cause: FailureCause::SecondaryCollision, .. }), "{o:?}");
+    assert!(
+        matches!(
+            o,
+            Outcome::Failure {
+                cause: FailureCause::SecondaryCollision,
+                ..
+            }
+        ),
+        "{o:?}"
+    );
     assert!(m.metrics().secondary_collision);
     // A reported obstacle contact of the bullet counts too.
     let mut m = monitor(vec![]);
@@ -131,18 +163,38 @@ fn touching_an_obstacle_is_a_secondary_collision() {
     ob.obstacle_contact = [true, false];
     assert!(matches!(
         m.observe(&ob),
-        Status::Done(Outcome::Failure { cause: FailureCause::SecondaryCollision, .. })
+        Status::Done(Outcome::Failure {
+            cause: FailureCause::SecondaryCollision,
+            ..
+        })
     ));
-    assert_eq!(m.metrics().failed_vehicle, Some(sim::outcome::Party::Bullet));
+    assert_eq!(
+        m.metrics().failed_vehicle,
+        Some(sim::outcome::Party::Bullet)
+    );
 }
 
 #[test]
 fn the_first_cause_wins() {
-    let parked = Obstacle { x: 60.0, y: 5.5, heading: 0.0, vx: 0.0, vy: 0.0, length: 4.5, width: 1.0 };
+    let parked = Obstacle {
+        x: 60.0,
+        y: 5.5,
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.0,
+    };
     // The same observation crosses the edge and hits the obstacle: boundary first (order).
     let mut m = monitor(vec![parked.clone()]);
     let st = m.observe(&obs(DT, 60.0, 5.8, 0.0, 5.0, 0.0));
-    assert!(matches!(st, Status::Done(Outcome::Failure { cause: FailureCause::BoundaryViolation, .. })));
+    assert!(matches!(
+        st,
+        Status::Done(Outcome::Failure {
+            cause: FailureCause::BoundaryViolation,
+            ..
+        })
+    ));
     assert!(m.metrics().boundary_violation && m.metrics().secondary_collision);
 
     // Infeasible decision first, then a boundary violation: the decision stays.
@@ -150,18 +202,34 @@ fn the_first_cause_wins() {
     m.observe(&obs(DT, 50.0, 0.0, 0.0, 10.0, 0.0));
     assert!(matches!(
         m.decision_infeasible(0.1),
-        Status::Done(Outcome::Failure { cause: FailureCause::DecisionInfeasible, .. })
+        Status::Done(Outcome::Failure {
+            cause: FailureCause::DecisionInfeasible,
+            ..
+        })
     ));
     let st = m.observe(&obs(0.15, 50.0, 6.0, 0.0, 10.0, 0.0));
-    assert!(matches!(st, Status::Done(Outcome::Failure { cause: FailureCause::DecisionInfeasible, .. })));
+    assert!(matches!(
+        st,
+        Status::Done(Outcome::Failure {
+            cause: FailureCause::DecisionInfeasible,
+            ..
+        })
+    ));
     assert!(!m.metrics().boundary_violation);
 
     // An obstacle hit at 1 s, a boundary crossing later: secondary collision.
     let mut m = monitor(vec![parked]);
     let o = run_until_done(&mut m, |t| {
-        if t < 1.0 { obs(t, 40.0, 0.0, 0.0, 5.0, 0.0) } else { obs(t, 60.0, 4.9, 0.0, 5.0, 0.0) }
+        if t < 1.0 {
+            obs(t, 40.0, 0.0, 0.0, 5.0, 0.0)
+        } else {
+            obs(t, 60.0, 4.9, 0.0, 5.0, 0.0)
+        }
     });
-    assert!(matches!(o, Outcome::Failure { cause: FailureCause::SecondaryCollision, time } if (time - 1.0).abs() < 1e-9), "{o:?}");
+    assert!(
+        matches!(o, Outcome::Failure { cause: FailureCause::SecondaryCollision, time } if (time - 1.0).abs() < 1e-9),
+        "{o:?}"
+    );
 }
 
 fn contact_obs(t: f64, touching: bool, closing: f64) -> Observation {
@@ -179,7 +247,10 @@ fn a_hard_recontact_in_stabilisation_is_an_unsafe_rebound() {
         let touching = (1.0..1.25).contains(&t) || (2.0..2.1).contains(&t);
         contact_obs(t, touching, if t > 1.9 { 3.0 } else { 4.0 })
     });
-    assert!(matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 2.0).abs() < 1e-9), "{o:?}");
+    assert!(
+        matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 2.0).abs() < 1e-9),
+        "{o:?}"
+    );
     assert_eq!(m.metrics().contacts, 2);
 
     // The same with a gentle re-contact (0.5 m/s): no rebound.
@@ -188,7 +259,16 @@ fn a_hard_recontact_in_stabilisation_is_an_unsafe_rebound() {
         let touching = (1.0..1.25).contains(&t) || (2.0..2.1).contains(&t);
         contact_obs(t, touching, if t > 1.9 { 0.5 } else { 4.0 })
     });
-    assert!(matches!(o, Outcome::Failure { cause: FailureCause::NoTermination, .. }), "{o:?}");
+    assert!(
+        matches!(
+            o,
+            Outcome::Failure {
+                cause: FailureCause::NoTermination,
+                ..
+            }
+        ),
+        "{o:?}"
+    );
     assert_eq!(m.metrics().contacts, 2);
 
     // Chatter within 0.3 s is one episode (a push), never a rebound.
@@ -197,17 +277,30 @@ fn a_hard_recontact_in_stabilisation_is_an_unsafe_rebound() {
         let touching = (1.0..1.1).contains(&t) || (1.25..1.4).contains(&t);
         contact_obs(t, touching, 4.0)
     });
-    assert!(matches!(o, Outcome::Failure { cause: FailureCause::NoTermination, .. }), "{o:?}");
+    assert!(
+        matches!(
+            o,
+            Outcome::Failure {
+                cause: FailureCause::NoTermination,
+                ..
+            }
+        ),
+        "{o:?}"
+    );
     assert_eq!(m.metrics().contacts, 1);
 
     // A second push before the controller enters stabilisation is allowed; one after is not.
     let mut m = monitor(vec![]);
     m.enter_stabilisation(3.0);
     let o = run_until_done(&mut m, |t| {
-        let touching = (1.0..1.25).contains(&t) || (2.0..2.1).contains(&t) || (3.5..3.6).contains(&t);
+        let touching =
+            (1.0..1.25).contains(&t) || (2.0..2.1).contains(&t) || (3.5..3.6).contains(&t);
         contact_obs(t, touching, 3.0)
     });
-    assert!(matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 3.5).abs() < 1e-9), "{o:?}");
+    assert!(
+        matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 3.5).abs() < 1e-9),
+        "{o:?}"
+    );
     assert_eq!(m.metrics().contacts, 3);
 }
 

@@ -35,7 +35,10 @@ fn a_file_with_a_bad_line_names_the_line_and_the_field() {
     let text = format!("{good}\n\n{second}\n");
     let err = parse_jsonl(&text).unwrap_err();
     let msg = err.to_string();
-    assert!(matches!(err, ScenarioError::Field { line: 3, ref field, .. } if field == "mu"), "{msg}");
+    assert!(
+        matches!(err, ScenarioError::Field { line: 3, ref field, .. } if field == "mu"),
+        "{msg}"
+    );
     assert!(msg.starts_with("line 3: mu:"), "{msg}");
 }
 
@@ -78,14 +81,26 @@ fn ranges_and_consistency_are_checked() {
     let cases: Vec<(&str, Edit)> = vec![
         ("mu", Box::new(|v| v["mu"] = json!(0.0))),
         ("adhesion", Box::new(|v| v["adhesion"] = json!("low"))),
-        ("road.radius", Box::new(|v| v["category"] = json!("straight_highway"))),
+        (
+            "road.radius",
+            Box::new(|v| v["category"] = json!("straight_highway")),
+        ),
         ("target.d", Box::new(|v| v["target"]["d"] = json!(9.0))),
         ("bullet.vx", Box::new(|v| v["bullet"]["vx"] = json!(-2.0))),
         ("t_max", Box::new(|v| v["t_max"] = json!(0.0))),
         ("eps_psi", Box::new(|v| v["eps_psi"] = json!(2.0))),
-        ("road.radius", Box::new(|v| v["road"]["radius"] = json!(3.0))),
-        ("road.length", Box::new(|v| v["road"]["length"] = json!(150.0))),
-        ("driver.gain", Box::new(|v| v["driver"]["gain"] = json!(0.0))),
+        (
+            "road.radius",
+            Box::new(|v| v["road"]["radius"] = json!(3.0)),
+        ),
+        (
+            "road.length",
+            Box::new(|v| v["road"]["length"] = json!(150.0)),
+        ),
+        (
+            "driver.gain",
+            Box::new(|v| v["driver"]["gain"] = json!(0.0)),
+        ),
         ("id", Box::new(|v| v["id"] = json!(""))),
     ];
     for (field, edit) in cases {
@@ -99,9 +114,15 @@ fn ranges_and_consistency_are_checked() {
 #[test]
 fn not_json_is_a_syntax_error_with_the_line() {
     let err = Scenario::from_json_line("{\"id\": ", 9).unwrap_err();
-    assert!(matches!(err, ScenarioError::Syntax { line: 9, .. }), "{err}");
+    assert!(
+        matches!(err, ScenarioError::Syntax { line: 9, .. }),
+        "{err}"
+    );
     let text = format!("{}\n{{oops\n", common::curved());
-    assert!(matches!(parse_jsonl(&text), Err(ScenarioError::Syntax { line: 2, .. })));
+    assert!(matches!(
+        parse_jsonl(&text),
+        Err(ScenarioError::Syntax { line: 2, .. })
+    ));
 }
 
 #[test]
@@ -110,7 +131,11 @@ fn duplicate_ids_are_refused() {
     let text = format!("{v}\n{v}\n");
     assert!(matches!(
         parse_jsonl(&text),
-        Err(ScenarioError::DuplicateId { line: 2, first: 1, .. })
+        Err(ScenarioError::DuplicateId {
+            line: 2,
+            first: 1,
+            ..
+        })
     ));
 }
 
@@ -120,13 +145,20 @@ fn load_jsonl_reports_io_and_empty_files() {
     std::fs::create_dir_all(&dir).unwrap();
     let empty = dir.join("empty.jsonl");
     std::fs::write(&empty, "\n\n").unwrap();
-    assert!(matches!(sim::load_jsonl(&empty), Err(ScenarioError::Empty { .. })));
+    assert!(matches!(
+        sim::load_jsonl(&empty),
+        Err(ScenarioError::Empty { .. })
+    ));
     assert!(matches!(
         sim::load_jsonl(dir.join("missing.jsonl")),
         Err(ScenarioError::Io { .. })
     ));
     let ok = dir.join("ok.jsonl");
-    std::fs::write(&ok, format!("{}\n{}\n", common::curved(), common::straight())).unwrap();
+    std::fs::write(
+        &ok,
+        format!("{}\n{}\n", common::curved(), common::straight()),
+    )
+    .unwrap();
     assert_eq!(sim::load_jsonl(&ok).unwrap().len(), 2);
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -151,9 +183,22 @@ fn a_lane_keeping_target_stays_in_its_lane_on_the_curve() {
     let sc = Scenario::from_json_line(&common::curved().to_string(), 1).unwrap();
     let params = sc.params.load().unwrap();
     let road = sc.build_road().unwrap();
-    let mut plant = Plant::new(&params, PlantConfig { mu: sc.mu, ..PlantConfig::default() }).unwrap();
+    let mut plant = Plant::new(
+        &params,
+        PlantConfig {
+            mu: sc.mu,
+            ..PlantConfig::default()
+        },
+    )
+    .unwrap();
     let (_, ti) = sc.initial_states(&road);
-    plant.reset(&VehicleInit { x: -1e5, ..VehicleInit::default() }, &ti);
+    plant.reset(
+        &VehicleInit {
+            x: -1e5,
+            ..VehicleInit::default()
+        },
+        &ti,
+    );
     let mut driver = sc.target_driver(&params);
     let mut worst: f64 = 0.0;
     for k in 0..200 {

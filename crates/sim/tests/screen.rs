@@ -69,17 +69,38 @@ fn a_target_hitting_forward_traffic_first_is_impossible() {
 fn geometry_rules_reject() {
     type Edit = Box<dyn Fn(&mut serde_json::Value)>;
     let cases: Vec<(&str, Edit)> = vec![
-        ("bullet_not_behind", Box::new(|v| v["bullet"]["s"] = json!(70.0))),
-        ("target_off_road", Box::new(|v| v["target"]["d"] = json!(5.9))),
-        ("vehicles_overlap", Box::new(|v| { v["bullet"]["s"] = json!(58.0); v["bullet"]["d"] = json!(0.5); })),
-        ("target_near_obstacle", Box::new(|v| v["obstacles"] = json!([{"role": "roadside",
-            "body": {"x": 60.0, "y": 2.0, "heading": 0.0, "vx": 0.0, "vy": 0.0, "length": 1.0, "width": 1.0}}]))),
-        ("target_too_fast_for_curve", Box::new(|v| {
-            v["category"] = json!("curved");
-            v["road"] = json!({"lanes": 3, "lane_width": 3.5, "shoulder": 1.0, "length": 200.0,
+        (
+            "bullet_not_behind",
+            Box::new(|v| v["bullet"]["s"] = json!(70.0)),
+        ),
+        (
+            "target_off_road",
+            Box::new(|v| v["target"]["d"] = json!(5.9)),
+        ),
+        (
+            "vehicles_overlap",
+            Box::new(|v| {
+                v["bullet"]["s"] = json!(58.0);
+                v["bullet"]["d"] = json!(0.5);
+            }),
+        ),
+        (
+            "target_near_obstacle",
+            Box::new(|v| {
+                v["obstacles"] = json!([{"role": "roadside",
+            "body": {"x": 60.0, "y": 2.0, "heading": 0.0, "vx": 0.0, "vy": 0.0, "length": 1.0, "width": 1.0}}])
+            }),
+        ),
+        (
+            "target_too_fast_for_curve",
+            Box::new(|v| {
+                v["category"] = json!("curved");
+                v["road"] = json!({"lanes": 3, "lane_width": 3.5, "shoulder": 1.0, "length": 200.0,
                                "radius": 60.0, "entry": 50.0, "transition": 20.0});
-            v["mu"] = json!(0.3); v["adhesion"] = json!("low");
-        })),
+                v["mu"] = json!(0.3);
+                v["adhesion"] = json!("low");
+            }),
+        ),
     ];
     for (rule, edit) in cases {
         let mut v = common::straight();

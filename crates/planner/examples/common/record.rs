@@ -62,10 +62,31 @@ pub fn record(params: &ParamSet) -> Vec<Record> {
     let road = road();
     let obstacles = obstacles();
     let lane = road.lane_center_offset(1);
-    let mut plant = Plant::new(params, PlantConfig { mu: MU, ..PlantConfig::default() }).unwrap();
+    let mut plant = Plant::new(
+        params,
+        PlantConfig {
+            mu: MU,
+            ..PlantConfig::default()
+        },
+    )
+    .unwrap();
     plant.reset(
-        &VehicleInit { x: 88.0, y: lane + 3.0, yaw: 0.0, vx: 17.0, vy: 0.0, r: 0.0 },
-        &VehicleInit { x: 100.0, y: lane, yaw: 0.0, vx: 15.0, vy: 0.0, r: 0.0 },
+        &VehicleInit {
+            x: 88.0,
+            y: lane + 3.0,
+            yaw: 0.0,
+            vx: 17.0,
+            vy: 0.0,
+            r: 0.0,
+        },
+        &VehicleInit {
+            x: 100.0,
+            y: lane,
+            yaw: 0.0,
+            vx: 15.0,
+            vy: 0.0,
+            r: 0.0,
+        },
     );
     let mut out = Vec::new();
     for step in 0..120 {
@@ -84,7 +105,11 @@ pub fn record(params: &ParamSet) -> Vec<Record> {
             .unwrap();
         let d = (bullet[0] - target[6]).hypot(bullet[1] - target[7]);
         if o.phase.is_active() && d < 12.0 {
-            out.push(Record { time, target, bullet });
+            out.push(Record {
+                time,
+                target,
+                bullet,
+            });
         }
         plant.set_bullet_command_blended(o.command[0], o.command[1]);
         plant.advance(dt);
@@ -95,7 +120,10 @@ pub fn record(params: &ParamSet) -> Vec<Record> {
 
 /// The target models the benches compare: 4-DOF and, where the shipped files load, the PINN
 /// and PicoPINN.
-pub fn models(params: &ParamSet, dt: f64) -> Vec<(&'static str, Box<dyn TargetModel + Send + Sync>)> {
+pub fn models(
+    params: &ParamSet,
+    dt: f64,
+) -> Vec<(&'static str, Box<dyn TargetModel + Send + Sync>)> {
     let mut v: Vec<(&'static str, Box<dyn TargetModel + Send + Sync>)> =
         vec![("4dof", Box::new(FourDofTarget::new(&params.target, MU, dt)))];
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/full_size");
