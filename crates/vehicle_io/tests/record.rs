@@ -1,0 +1,494 @@
+//! The MCAP recorder: every sample on every topic, Foxglove schemas, and a file that survives
+//! SIGKILL up to its last flush.
+
+// `..Default::default()` keeps the fixtures compiling as the payloads grow fields.
+#![allow(clippy::needless_update)]
+
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::*;
+use mcap::records::Record;
+use mcap::MessageStream;
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+use vehicle_io::msg::{
+    ActuatorCommand, ControllerStatus, Heartbeat, StateEstimate, PEER_CONTROLLER, PEER_VEHICLE,
+};
+use vehicle_io::ports::{self, ServiceNames, Svc};
+use vehicle_io::record::{topic, RecordMeta, Recorder, RoadLines, VehicleBox};
+
+static NEXT: AtomicU32 = AtomicU32::new(0);
+
+/// A service prefix no other test (or test process) uses.
+fn unique_prefix() -> String {
+    format!(
+        "picopit-test-{}-{}",
+        std::process::id(),
+        NEXT.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+fn temp_file(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("picopit-record-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn meta() -> RecordMeta {
+    RecordMeta::new(
+        VehicleBox {
+            length: 4.5,
+            width: 1.75,
+            height: 1.5,
+        },
+        VehicleBox {
+            length: 5.0,
+            width: 2.0,
+            height: 1.25,
+        },
+    )
+    .with_road(RoadLines {
+        left: vec![[0.0, 5.5], [200.0, 5.5]],
+        right: vec![[0.0, -5.5], [200.0, -5.5]],
+        centre: vec![[0.0, 0.0], [100.0, 0.0], [200.0, 0.0]],
+    })
+    .with_entry("scenario", "unit-test")
+    .with_entry("git_commit", "0000000")
+}
+
+/// Values that JSON carries exactly (multiples of 1/8).
+fn state(k: u64) -> StateEstimate {
+    let f = k as f64 * 0.125;
+    StateEstimate {
+        seq: k,
+        stamp_ns: 20_000_000 * k,
+        sent_ns: 20_000_000 * k + 1_000_000,
+        wall_sent_ns: 1_000 + k,
+        target: [20.0 + f, 0.5, 0.25 - f, 0.0, 0.0, -0.125, 10.0 + f, 1.75],
+        bullet: [2.0 * f, -3.5, 0.7 + f, 24.0, 0.25, 0.5],
+        target_input: [0.0, 100.0 * f],
+        bullet_applied: [0.0625, -50.0],
+        flags: (k % 3) as u32,
+        commands_applied: k as u32,
+        ..StateEstimate::default()
+    }
+}
+
+fn command(k: u64) -> ActuatorCommand {
+    ActuatorCommand {
+        seq: k,
+        state_seq: k,
+        stamp_ns: 20_000_000 * k + 5_000_000,
+        valid_until_ns: 20_000_000 * k + 45_000_000,
+        wall_state_received_ns: 2_000 + k,
+        wall_sent_ns: 3_000 + k,
+        steer: -0.125 * k as f64,
+        torque: 250.0 - 16.0 * k as f64,
+        mode: (k % 3) as u32,
+        _reserved: 0,
+        ..ActuatorCommand::default()
+    }
+}
+
+fn status(k: u64) -> ControllerStatus {
+    ControllerStatus {
+        seq: k,
+        state_seq: k,
+        stamp_ns: 20_000_000 * k + 5_000_000,
+        compensated_ns: 5_000_000,
+        ctrl_ns: 100_000 + k,
+        plan_ns: 0,
+        deadline_misses: 0,
+        fallbacks: (k / 4) as u32,
+        stale_states: 1,
+        phase: (k % 5) as u32,
+        mpc_status: 1,
+        faults: if k % 7 == 3 { 1 << 1 } else { 0 },
+        ..ControllerStatus::default()
+    }
+}
+
+fn heartbeat(k: u64, peer: u32) -> Heartbeat {
+    Heartbeat {
+        seq: k,
+        wall_sent_ns: 4_000 + k,
+        vehicle_ns: if peer == PEER_VEHICLE {
+            20_000_000 * k + 7
+        } else {
+            0
+        },
+        peer,
+        pid: 4242,
+        ..Heartbeat::default()
+    }
+}
+
+struct Pubs {
+    _node: Node<Svc>,
+    state: Publisher<Svc, StateEstimate, ()>,
+    command: Publisher<Svc, ActuatorCommand, ()>,
+    status: Publisher<Svc, ControllerStatus, ()>,
+    hb_c: Publisher<Svc, Heartbeat, ()>,
+    hb_v: Publisher<Svc, Heartbeat, ()>,
+}
+
+impl Pubs {
+    fn open(names: &ServiceNames) -> Self {
+        let node = ports::node("record-test").unwrap();
+        Self {
+            state: ports::publisher(&node, &names.state).unwrap(),
+            command: ports::publisher(&node, &names.command).unwrap(),
+            status: ports::publisher(&node, &names.status).unwrap(),
+            hb_c: ports::publisher(&node, &names.heartbeat_controller).unwrap(),
+            hb_v: ports::publisher(&node, &names.heartbeat_vehicle).unwrap(),
+            _node: node,
+        }
+    }
+
+    /// Publish sample `k` on every topic.
+    fn publish(&self, k: u64) {
+        ports::publish(&self.state, state(k)).unwrap();
+        ports::publish(&self.command, command(k)).unwrap();
+        ports::publish(&self.status, status(k)).unwrap();
+        ports::publish(&self.hb_c, heartbeat(k, PEER_CONTROLLER)).unwrap();
+        ports::publish(&self.hb_v, heartbeat(k, PEER_VEHICLE)).unwrap();
+    }
+}
+
+/// Every message a streaming reader yields before the end (or the first error), and whether
+/// it ended with an error.
+fn stream(bytes: &[u8]) -> (Vec<mcap::Message<'static>>, bool) {
+    let mut out = Vec::new();
+    let Ok(reader) = MessageStream::new(bytes) else {
+        return (out, true);
+    };
+    for m in reader {
+        match m {
+            Ok(m) => out.push(m),
+            Err(_) => return (out, true),
+        }
+    }
+    (out, false)
+}
+
+fn by_topic(msgs: &[mcap::Message<'static>]) -> BTreeMap<String, Vec<serde_json::Value>> {
+    let mut map: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
+    for m in msgs {
+        map.entry(m.channel.topic.clone())
+            .or_default()
+            .push(serde_json::from_slice(&m.data).unwrap());
+    }
+    map
+}
+
+fn yaw_of(q: &serde_json::Value) -> f64 {
+    let z = q["z"].as_f64().unwrap();
+    let w = q["w"].as_f64().unwrap();
+    assert_eq!(q["x"].as_f64(), Some(0.0));
+    assert_eq!(q["y"].as_f64(), Some(0.0));
+    2.0 * z.atan2(w)
+}
+
+fn wrap(a: f64) -> f64 {
+    (a + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI
+}
+
+#[test]
+#[allow(clippy::needless_range_loop)] // k indexes several topics at once
+fn records_every_topic_with_schemas_and_round_trips() {
+    const N: u64 = 20;
+    let names = ServiceNames::new(&unique_prefix()).unwrap();
+    let path = temp_file("all-topics.mcap");
+    let rec = Recorder::spawn(&names, &path, meta()).unwrap();
+    assert!(rec.is_running());
+    let pubs = Pubs::open(&names);
+    for k in 0..N {
+        pubs.publish(k);
+        std::thread::sleep(Duration::from_micros(300));
+    }
+    let stats = rec.stop().unwrap();
+    for t in topic::ALL {
+        assert_eq!(stats.count(t), N, "{t}: {stats:?}");
+    }
+    assert_eq!(stats.total(), 8 * N);
+    assert!(stats.seq_gaps.values().all(|&g| g == 0), "{stats:?}");
+
+    let bytes = std::fs::read(&path).unwrap();
+    // A finished file: the footer and summary are there.
+    let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+    assert_eq!(summary.stats.as_ref().unwrap().message_count, 8 * N);
+    let (msgs, err) = stream(&bytes);
+    assert!(!err, "a finished file streams to its end");
+    assert_eq!(msgs.len() as u64, 8 * N);
+
+    // Log times are monotonic; publish times are the vehicle stamps.
+    assert!(msgs.windows(2).all(|w| w[0].log_time <= w[1].log_time));
+    for m in &msgs {
+        assert_eq!(m.channel.message_encoding, "json");
+        let schema = m
+            .channel
+            .schema
+            .as_ref()
+            .expect("every channel has a schema");
+        assert_eq!(schema.encoding, "jsonschema");
+        let _: serde_json::Value = serde_json::from_slice(&schema.data).unwrap();
+        let expected = match m.channel.topic.as_str() {
+            topic::STATE => "picopit.StateEstimate",
+            topic::COMMAND => "picopit.ActuatorCommand",
+            topic::STATUS => "picopit.ControllerStatus",
+            topic::HEARTBEAT_CONTROLLER | topic::HEARTBEAT_VEHICLE => "picopit.Heartbeat",
+            topic::SCENE => "foxglove.SceneUpdate",
+            topic::BULLET_POSE | topic::TARGET_POSE => "foxglove.PoseInFrame",
+            other => panic!("unexpected topic {other}"),
+        };
+        assert_eq!(schema.name, expected, "{}", m.channel.topic);
+    }
+    let states: Vec<_> = msgs
+        .iter()
+        .filter(|m| m.channel.topic == topic::STATE)
+        .collect();
+    for (k, m) in states.iter().enumerate() {
+        assert_eq!(m.publish_time, state(k as u64).sent_ns);
+        assert_eq!(m.sequence as usize, k);
+    }
+
+    // The raw payloads decode back to the values sent.
+    let t = by_topic(&msgs);
+    for k in 0..N as usize {
+        let ku = k as u64;
+        let s: StateEstimate = serde_json::from_value(t[topic::STATE][k].clone()).unwrap();
+        assert_eq!(s, state(ku));
+        let c: ActuatorCommand = serde_json::from_value(t[topic::COMMAND][k].clone()).unwrap();
+        assert_eq!(c, command(ku));
+        let st: ControllerStatus = serde_json::from_value(t[topic::STATUS][k].clone()).unwrap();
+        assert_eq!(st, status(ku));
+        let h: Heartbeat =
+            serde_json::from_value(t[topic::HEARTBEAT_CONTROLLER][k].clone()).unwrap();
+        assert_eq!(h, heartbeat(ku, PEER_CONTROLLER));
+        let h: Heartbeat = serde_json::from_value(t[topic::HEARTBEAT_VEHICLE][k].clone()).unwrap();
+        assert_eq!(h, heartbeat(ku, PEER_VEHICLE));
+
+        // Poses: position and yaw of each vehicle, in frame `world`, stamped with stamp_ns.
+        let s = state(ku);
+        for (tp, x, y, psi) in [
+            (topic::BULLET_POSE, s.bullet[0], s.bullet[1], s.bullet[2]),
+            (topic::TARGET_POSE, s.target[6], s.target[7], s.target[2]),
+        ] {
+            let p = &t[tp][k];
+            assert_eq!(p["frame_id"], "world");
+            assert_eq!(
+                p["timestamp"]["sec"].as_u64(),
+                Some(s.stamp_ns / 1_000_000_000)
+            );
+            assert_eq!(
+                p["timestamp"]["nsec"].as_u64(),
+                Some(s.stamp_ns % 1_000_000_000)
+            );
+            assert_eq!(p["pose"]["position"]["x"].as_f64(), Some(x));
+            assert_eq!(p["pose"]["position"]["y"].as_f64(), Some(y));
+            assert!(wrap(yaw_of(&p["pose"]["orientation"]) - psi).abs() < 1e-12);
+        }
+
+        // The scene: one cube per vehicle of its size at its pose; the road on the first.
+        let scene = &t[topic::SCENE][k];
+        let entities = scene["entities"].as_array().unwrap();
+        let ids: Vec<_> = entities.iter().map(|e| e["id"].as_str().unwrap()).collect();
+        if k == 0 {
+            assert_eq!(ids, ["bullet", "target", "road"]);
+            let lines = entities[2]["lines"].as_array().unwrap();
+            assert_eq!(lines.len(), 3);
+            assert_eq!(lines[2]["points"].as_array().unwrap().len(), 3);
+            assert_eq!(lines[0]["type"], 0);
+        } else {
+            assert_eq!(ids, ["bullet", "target"]);
+        }
+        for (e, b, psi, x, y) in [
+            (
+                &entities[0],
+                meta().bullet,
+                s.bullet[2],
+                s.bullet[0],
+                s.bullet[1],
+            ),
+            (
+                &entities[1],
+                meta().target,
+                s.target[2],
+                s.target[6],
+                s.target[7],
+            ),
+        ] {
+            assert_eq!(e["frame_id"], "world");
+            let cube = &e["cubes"][0];
+            assert_eq!(cube["size"]["x"].as_f64(), Some(b.length));
+            assert_eq!(cube["size"]["y"].as_f64(), Some(b.width));
+            assert_eq!(cube["size"]["z"].as_f64(), Some(b.height));
+            assert!((cube["pose"]["position"]["x"].as_f64().unwrap() - x).abs() < 1e-12);
+            assert!((cube["pose"]["position"]["y"].as_f64().unwrap() - y).abs() < 1e-12);
+            assert_eq!(cube["pose"]["position"]["z"].as_f64(), Some(0.5 * b.height));
+            assert!(wrap(yaw_of(&cube["pose"]["orientation"]) - psi).abs() < 1e-12);
+            for key in ["arrows", "spheres", "cylinders", "triangles", "models"] {
+                assert_eq!(e[key], serde_json::json!([]), "{key}");
+            }
+        }
+    }
+
+    // The Metadata record carries the boxes and the caller's entries.
+    let metadata: Vec<_> = mcap::read::LinearReader::new(&bytes)
+        .unwrap()
+        .filter_map(|r| match r.unwrap() {
+            Record::Metadata(m) => Some(m),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(metadata.len(), 1);
+    let md = &metadata[0].metadata;
+    assert_eq!(metadata[0].name, "picopit");
+    assert_eq!(md["scenario"], "unit-test");
+    assert_eq!(md["git_commit"], "0000000");
+    assert_eq!(md["bullet.length"], "4.5");
+    assert_eq!(md["target.width"], "2");
+    assert_eq!(md["service.state"], names.state);
+    // PICOPIT_RECORD_KEEP=DIR keeps a copy (e.g. to try `picopit replay` or Foxglove on it).
+    if let Ok(dir) = std::env::var("PICOPIT_RECORD_KEEP") {
+        std::fs::copy(&path, Path::new(&dir).join("record-test.mcap")).unwrap();
+    }
+    let _ = std::fs::remove_file(&path);
+}
+
+#[test]
+fn drop_without_stop_finishes_the_file() {
+    let names = ServiceNames::new(&unique_prefix()).unwrap();
+    let path = temp_file("dropped.mcap");
+    let rec = Recorder::spawn(&names, &path, RecordMeta::default()).unwrap();
+    let pubs = Pubs::open(&names);
+    for k in 0..5 {
+        pubs.publish(k);
+    }
+    drop(rec);
+    let bytes = std::fs::read(&path).unwrap();
+    assert!(mcap::Summary::read(&bytes).unwrap().is_some());
+    let (msgs, err) = stream(&bytes);
+    assert!(!err);
+    // No road: the scene is still written.
+    assert_eq!(msgs.len(), 5 * 8);
+    let _ = std::fs::remove_file(&path);
+}
+
+#[test]
+fn spawn_names_the_file_it_cannot_create() {
+    let names = ServiceNames::new(&unique_prefix()).unwrap();
+    let path = Path::new("/nonexistent-dir-picopit/x.mcap");
+    let e = Recorder::spawn(&names, path, RecordMeta::default())
+        .err()
+        .expect("cannot create");
+    assert!(
+        e.to_string().contains("/nonexistent-dir-picopit/x.mcap"),
+        "{e}"
+    );
+}
+
+/// Wait until the file at `path` streams `n` messages (the recorder flushed them).
+fn wait_flushed(path: &Path, n: usize) {
+    let start = Instant::now();
+    loop {
+        let bytes = std::fs::read(path).unwrap();
+        if stream(&bytes).0.len() >= n {
+            return;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "never flushed {n}"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+#[test]
+#[allow(clippy::needless_range_loop)]
+fn unfinished_and_truncated_files_stream_up_to_the_last_flushed_message() {
+    const N: u64 = 10;
+    let names = ServiceNames::new(&unique_prefix()).unwrap();
+    let path = temp_file("mid-run.mcap");
+    let rec = Recorder::spawn(&names, &path, meta()).unwrap();
+    let pubs = Pubs::open(&names);
+    for k in 0..N {
+        pubs.publish(k);
+    }
+    wait_flushed(&path, (8 * N) as usize);
+    // Copy the file mid-run: exactly what a killed process leaves behind.
+    let bytes = std::fs::read(&path).unwrap();
+    assert!(mcap::Summary::read(&bytes).is_err() || mcap::Summary::read(&bytes).unwrap().is_none());
+    let (msgs, _) = stream(&bytes);
+    assert_eq!(msgs.len() as u64, 8 * N);
+    let t = by_topic(&msgs);
+    for k in 0..N as usize {
+        let s: StateEstimate = serde_json::from_value(t[topic::STATE][k].clone()).unwrap();
+        assert_eq!(s, state(k as u64));
+    }
+
+    // Cut inside the last message: everything before it still streams.
+    let (all, _) = stream(&bytes);
+    for cut in [1usize, 7, 20] {
+        let (msgs, err) = stream(&bytes[..bytes.len() - cut]);
+        assert!(err, "a truncated file ends with an error, not a panic");
+        assert_eq!(msgs.len(), all.len() - 1, "cut {cut}");
+    }
+    rec.stop().unwrap();
+    let _ = std::fs::remove_file(&path);
+}
+
+const CHILD_ENV: &str = "PICOPIT_RECORD_CRASH_CHILD";
+
+/// The child of `sigkill_leaves_a_readable_file` (does nothing unless run by it).
+#[test]
+#[ignore = "run as a child process by sigkill_leaves_a_readable_file"]
+fn crash_child() {
+    let Ok(spec) = std::env::var(CHILD_ENV) else {
+        return;
+    };
+    let (prefix, path) = spec.split_once('|').unwrap();
+    let names = ServiceNames::new(prefix).unwrap();
+    let rec = Recorder::spawn(&names, Path::new(path), meta()).unwrap();
+    let pubs = Pubs::open(&names);
+    for k in 0..12 {
+        pubs.publish(k);
+    }
+    wait_flushed(Path::new(path), 12 * 8);
+    println!("FLUSHED");
+    std::thread::sleep(Duration::from_secs(120));
+    drop(rec);
+}
+
+#[test]
+fn sigkill_leaves_a_readable_file() {
+    let prefix = unique_prefix();
+    let path = temp_file("killed.mcap");
+    let mut child = Command::new(std::env::current_exe().unwrap())
+        .args(["crash_child", "--exact", "--ignored", "--nocapture"])
+        .env(CHILD_ENV, format!("{prefix}|{}", path.display()))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let flushed = lines.any(|l| l.map(|l| l.trim() == "FLUSHED").unwrap_or(false));
+    child.kill().unwrap(); // SIGKILL
+    let _ = child.wait();
+    assert!(flushed, "the child never reported its flush");
+
+    let bytes = std::fs::read(&path).unwrap();
+    let (msgs, _) = stream(&bytes);
+    assert_eq!(msgs.len(), 12 * 8);
+    let t = by_topic(&msgs);
+    let s: StateEstimate = serde_json::from_value(t[topic::STATE][11].clone()).unwrap();
+    assert_eq!(s, state(11));
+    let _ = std::fs::remove_file(&path);
+
+    // Remove the killed process's iceoryx2 resources.
+    let node = ports::node("record-test-cleanup").unwrap();
+    let _ = node.try_cleanup_dead_nodes();
+}
