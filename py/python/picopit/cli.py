@@ -236,6 +236,30 @@ def _bench_parser(sub) -> None:
     p.set_defaults(func=_cmd_bench)
 
 
+def _replay_parser(sub) -> None:
+    p = sub.add_parser(
+        "replay",
+        help="figure and summary of an MCAP recording of pit-controller/pit-vehicle",
+        description=(
+            "Read an MCAP recording (also one cut short by a killed process: up to its last "
+            "complete message), draw the vehicles' paths, headings, the bullet commands and the "
+            "controller phase and faults into a PNG, and print a one-paragraph summary."
+        ),
+    )
+    p.add_argument("file", metavar="FILE.mcap", help="the recording")
+    p.add_argument("--out", metavar="PATH", help="PNG to write (default FILE.png)")
+    p.set_defaults(func=_cmd_replay)
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from .replay import replay
+
+    _, png, summary = replay(args.file, args.out)
+    print(summary)
+    print(f"replay: wrote {png}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -254,6 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     _eval_parser(sub)
     _scenarios_parser(sub)
     _bench_parser(sub)
+    _replay_parser(sub)
     return parser
 
 
@@ -537,6 +562,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         from ._core import EpisodeError, ScenarioError
 
         bad_input += (BenchError, EpisodeError, ScenarioError)
+    if args.command == "replay":
+        from .replay import ReplayError
+
+        bad_input += (ReplayError,)
     try:
         return int(args.func(args))
     except bad_input as e:
