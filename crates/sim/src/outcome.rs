@@ -195,6 +195,15 @@ pub struct Metrics {
     /// or secondary collision (`None` otherwise).
     #[serde(default)]
     pub failed_vehicle: Option<Party>,
+    /// Relative speed at the first bullet–target contact (m/s): `|v_B − v_T|` of the two
+    /// centres of gravity in the world frame at the first plant step in contact (`None`
+    /// without contact).
+    #[serde(default)]
+    pub impact_speed: Option<f64>,
+    /// Impact angle at the first contact (rad): `|wrap(ψ_B − ψ_T)|` (`None` without
+    /// contact).
+    #[serde(default)]
+    pub impact_angle: Option<f64>,
 }
 
 /// A vehicle of the episode (for [`Metrics::failed_vehicle`]).
@@ -346,6 +355,8 @@ impl Monitor {
                 contacts: 0,
                 observations: 0,
                 failed_vehicle: None,
+                impact_speed: None,
+                impact_angle: None,
             },
         })
     }
@@ -449,11 +460,23 @@ impl Monitor {
             Some(c) => (true, closing_speed(plant, c.point_in_world, c.gamma)),
             None => (false, 0.0),
         };
+        if touching {
+            self.record_impact(plant);
+        }
         self.contacts
             .sample(t, touching, closing, &self.settings, self.stabilising_since);
         let oc = plant.obstacle_contacts();
         for (latched, contact) in self.latched_obstacle.iter_mut().zip(oc) {
             *latched |= contact.is_some();
+        }
+    }
+
+    /// The relative speed and angle of the first contact (kept once recorded).
+    fn record_impact(&mut self, plant: &Plant) {
+        if self.metrics.impact_speed.is_none() {
+            let (b, t) = (plant.body(Which::Bullet), plant.body(Which::Target));
+            self.metrics.impact_speed = Some((b.vel - t.vel).norm());
+            self.metrics.impact_angle = Some(wrap_angle(b.yaw - t.yaw).abs());
         }
     }
 
@@ -463,6 +486,9 @@ impl Monitor {
             Some(c) => (true, closing_speed(plant, c.point_in_world, c.gamma)),
             None => (false, 0.0),
         };
+        if touching && self.outcome.is_none() {
+            self.record_impact(plant);
+        }
         let oc = plant.obstacle_contacts();
         let obs = Observation {
             time: plant.time(),
