@@ -348,6 +348,7 @@ impl PitController {
                         time: input.time,
                         dt,
                         pit_frame: self.pit_frame,
+                        length_scale: crate::settings::length_scale(&self.params),
                     },
                 );
             } else {

@@ -21,7 +21,7 @@
 //! after construction.
 
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
-use crate::settings::PlannerSettings;
+use crate::settings::{length_scale, PlannerSettings};
 use dynamics::bullet::BulletState;
 use dynamics::geometry::{rotate, Obb, Pose2, Vec2};
 use dynamics::params::ParamSet;
@@ -109,6 +109,8 @@ pub struct Planner {
     scale: f64,
     weight: f64,
     force_max: f64,
+    /// The vehicles' length scale ([`length_scale`]) for the built-in lengths.
+    len_scale: f64,
     // Rollout at the linearisation.
     xs: Vec<TargetState>,
     jac: TargetJacobians,
@@ -224,6 +226,7 @@ impl Planner {
             scale: settings.force_scale_g * weight,
             force_max: settings.force_max_g * weight,
             weight,
+            len_scale: length_scale(params),
             params: params.clone(),
             mu,
             model,
@@ -316,11 +319,12 @@ impl Planner {
     }
 
     /// The contact point's body x for offset `offset` from the rear quarter (clamped to the
-    /// target's side, at least 0.2 m from either bumper).
+    /// target's side, at least 0.2 m (full size; × the length scale) from either bumper).
     fn contact_x_at(&self, offset: f64) -> f64 {
         let t = &self.params.target;
-        let rear = -(t.length - t.cg_to_front) + 0.2;
-        (rear_quarter_x(&self.params) + offset).clamp(rear, t.cg_to_front - 0.2)
+        let clear = 0.2 * self.len_scale;
+        let rear = -(t.length - t.cg_to_front) + clear;
+        (rear_quarter_x(&self.params) + offset).clamp(rear, t.cg_to_front - clear)
     }
 
     /// Earliest time (s from now) the bullet can be at its contact pose on `side`: a simple
@@ -334,7 +338,8 @@ impl Planner {
         let rel = pose.body_from_world(Vec2::new(xb[0], xb[1]));
         let mut dx = (c.rel_pos.x - rel.x).abs();
         let dy = (c.rel_pos.y - rel.y).abs();
-        if dx.hypot(dy) < 0.3 || self.gap(xt, xb) < 0.1 {
+        let k = self.len_scale;
+        if dx.hypot(dy) < 0.3 * k || self.gap(xt, xb) < 0.1 * k {
             // At the contact pose, or touching already: a PIT under way.
             return 0.0;
         }
@@ -342,7 +347,7 @@ impl Planner {
             // On the other side: drop back behind the target's rear first.
             let behind = -(self.params.target.length - self.params.target.cg_to_front)
                 - self.params.bullet.cg_to_front
-                - 0.5;
+                - 0.5 * k;
             dx = (rel.x - behind).max(0.0) + (c.rel_pos.x - behind).abs();
         }
         s.settle_time + s.closing_time(dx).max(dy / s.lateral_speed)
@@ -461,7 +466,7 @@ impl Planner {
         // The contact point along the rear quarter: the other offsets, tried on the best
         // side and window only (one more candidate each); not while in contact, where the
         // contact point is wherever the bullet touches.
-        let touching = self.gap(&input.target, &input.bullet) < 0.1;
+        let touching = self.gap(&input.target, &input.bullet) < 0.1 * self.len_scale;
         if let Some(o) = best.or(best_any).filter(|_| !touching) {
             for i in 0..self.settings.contact_offsets.len() {
                 let off = self.settings.contact_offsets[i];

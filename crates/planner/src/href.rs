@@ -15,12 +15,15 @@ pub fn relative_position(xt: &TargetState, xb: &BulletState) -> Vec2 {
 }
 
 /// When the reference is for: the control step's time, the MPC's step, and the target's
-/// heading when the push began (the PIT phase's frame; `None` before it).
+/// heading when the push began (the PIT phase's frame; `None` before it); and the
+/// vehicles' length scale (`crate::length_scale`: 1 at full size), which scales the
+/// reference's built-in lengths (and its fall-back speed by the square root).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Timing {
     pub time: f64,
     pub dt: f64,
     pub pit_frame: Option<f64>,
+    pub length_scale: f64,
 }
 
 /// Fill the MPC reference for the control step at `time` (stage k refers to
@@ -49,6 +52,7 @@ pub fn fill_reference(
         time,
         dt,
         pit_frame,
+        length_scale: ls,
     } = at;
     let rel = relative_position(xt, xb);
     let psi_now = xt[idx::PSI];
@@ -64,14 +68,14 @@ pub fn fill_reference(
     };
     let stand = Vec2::new(contact.rel_pos.x, contact.rel_pos.y + side * s.standoff);
     // Fully behind the target's rear bumper (the contact station is at its rear quarter).
-    let behind_x = contact.rel_pos.x - 2.5;
+    let behind_x = contact.rel_pos.x - 2.5 * ls;
     let back = StageReference {
         rel_pos: Vec2::new(
-            contact.rel_pos.x - 3.0,
-            contact.rel_pos.y + side * (s.standoff + 1.0),
+            contact.rel_pos.x - 3.0 * ls,
+            contact.rel_pos.y + side * (s.standoff + 1.0 * ls),
         ),
         rel_heading: 0.0,
-        rel_speed: -2.0,
+        rel_speed: -2.0 * ls.sqrt(),
         track: 0.3,
         fn_lo: 0.0,
         fn_hi: 0.0,
@@ -94,6 +98,7 @@ pub fn fill_reference(
                         speed_cap: s.approach_speed_far,
                         lateral_speed: s.lateral_speed,
                         behind_x,
+                        length_scale: ls,
                     }
                     .stage(tau)
                 } else if tau <= t1 {
@@ -124,7 +129,7 @@ pub fn fill_reference(
         // An infeasible decision while chasing: keep station behind (the controller aborts
         // after its patience).
         Mode::Chase | Mode::Abort => {
-            let hold = Vec2::new(stand.x - 1.0, stand.y);
+            let hold = Vec2::new(stand.x - 1.0 * ls, stand.y);
             let arrive = time + s.closing_time(hold.x - rel.x).max(dt);
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
@@ -136,6 +141,7 @@ pub fn fill_reference(
                     speed_cap: s.approach_speed_far,
                     lateral_speed: s.lateral_speed,
                     behind_x,
+                    length_scale: ls,
                 }
                 .stage(tau);
             }
@@ -152,8 +158,9 @@ pub fn fill_reference(
 
 /// The approach: from the current relative position `rel` (at `time`) to `goal` at
 /// `arrive` (linearly in x), moving across at no more than `lateral_speed`, and kept behind
-/// `behind_x` while more than a metre off the goal's line (so that a bullet changing lanes
-/// behind the target does not close in on its rear first), then held.
+/// `behind_x` while more than a metre (full size; × `length_scale`) off the goal's line (so
+/// that a bullet changing lanes behind the target does not close in on its rear first),
+/// then held.
 #[derive(Debug, Clone, Copy)]
 struct Approach {
     rel: Vec2,
@@ -163,6 +170,7 @@ struct Approach {
     speed_cap: f64,
     lateral_speed: f64,
     behind_x: f64,
+    length_scale: f64,
 }
 
 impl Approach {
@@ -174,7 +182,7 @@ impl Approach {
         let reach = self.lateral_speed * (tau - self.time).max(0.0);
         let y = rel.y + (goal.y - rel.y).clamp(-reach, reach);
         let mut x = rel.x + (goal.x - rel.x) * a;
-        if (goal.y - y).abs() > 1.0 {
+        if (goal.y - y).abs() > self.length_scale {
             x = x.min(self.behind_x.max(rel.x));
         }
         let v = if tau < self.arrive {
@@ -189,7 +197,7 @@ impl Approach {
             track: 1.0,
             fn_lo: 0.0,
             fn_hi: 0.0,
-            envelope_lat: 1.5,
+            envelope_lat: 1.5 * self.length_scale,
         }
     }
 }

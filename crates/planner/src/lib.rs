@@ -26,5 +26,6 @@ pub use decision::{PlanError, Planner, PlannerError, PlannerInput, MAX_OBSTACLES
 pub use package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 pub use phase::{AbortReason, Phase, PhaseMachine, PhaseObservation};
 pub use settings::{
-    ControllerSettings, PhaseSettings, PlanWeights, PlannerSettings, SettingsError,
+    length_scale, ControllerSettings, PhaseSettings, PlanWeights, PlannerSettings, SettingsError,
+    TUNED_BULLET_LENGTH,
 };

@@ -1,9 +1,24 @@
 //! Settings of the decision layer, the phase machine and the controller: serde structs with
 //! defaults, validated when the controller is built, loadable from TOML.
 
+use dynamics::params::ParamSet;
 use mpc::MpcSettings;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
+
+/// Length (m) of the bullet the built-in lengths of the reference, the approach model and
+/// the phase machine were tuned with: the full-size set's (`full_size.toml`, 4.508 m).
+pub const TUNED_BULLET_LENGTH: f64 = 4.508;
+
+/// The vehicles' length scale: the bullet's length over [`TUNED_BULLET_LENGTH`] (exactly 1
+/// for the full-size set, ≈ 0.47 for the half-scale platform). The built-in lengths of the
+/// controller (how far behind the target the bullet waits, the fall-back pose, the
+/// "at the contact pose" radius, …) are multiplied by it, speeds by its square root
+/// (Froude similarity); the lengths in the settings are given in metres as they are.
+#[must_use]
+pub fn length_scale(params: &ParamSet) -> f64 {
+    params.bullet.length / TUNED_BULLET_LENGTH
+}
 
 /// A setting that cannot be used; the message names the field.
 #[derive(Debug, Clone, PartialEq, Error)]
