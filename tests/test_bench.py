@@ -97,6 +97,14 @@ def test_per_episode_results_agree_with_the_summary(bench_run):
         rate = 100.0 * sum(bool(r["success"]) for r in rows) / 3
         assert doc["configs"][name]["success_rate"] == pytest.approx(rate)
         assert {r["scenario"] for r in rows} == set(doc["run"]["scene_ids"])
+    # The impact at the first contact (m/s, rad): a column each, empty (None / NaN / "")
+    # when the episode had no contact or the extension does not report it.
+    for r in table:
+        for k in ("impact_speed", "impact_angle"):
+            assert k in r, k
+            v = r[k]
+            if v not in (None, "") and v == v:
+                assert float(v) >= 0.0, (k, v)
 
 
 def test_representative_cases_are_drawn_and_logged(bench_run):
