@@ -532,3 +532,28 @@ pub(crate) fn rear_lateral_d(curve: &AxleCurve, lr: f64, vx: f64, vy: f64, r: f6
         d_r: -lr * dfy * da_dvy,
     }
 }
+
+/// Controlled braking along the road, the safe command of every fallback (the controller's
+/// abort, the I/O watchdog, the vehicle side's own safe stop): steer the bullet's heading
+/// onto the road's (`δ = 0.8 e_ψ − 0.1 r`, at most half the steer range) and brake with the
+/// force `fraction · μ m g` through the blended brakes (the rear-axle torque of that force,
+/// negative), released below 0.2 m/s so the car stays at rest.
+#[must_use]
+pub fn brake_along_road(
+    road: &crate::road::Road,
+    x: &BulletState,
+    p: &VehicleParams,
+    mu: f64,
+    fraction: f64,
+) -> BulletInput {
+    let road_heading = road.project(Vec2::new(x[idx::X], x[idx::Y])).heading;
+    let err = crate::wrap_angle(road_heading - x[idx::PSI]);
+    let delta = (0.8 * err - 0.1 * x[idx::R]).clamp(-0.5 * p.steer_max, 0.5 * p.steer_max);
+    let force = fraction * mu * p.mass * 9.81;
+    let brake = if x[idx::VX] > 0.2 {
+        -force * p.wheel_radius / (p.drive_efficiency * p.gear_ratio)
+    } else {
+        0.0
+    };
+    BulletInput::new(delta, brake)
+}

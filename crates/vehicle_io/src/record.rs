@@ -1085,6 +1085,8 @@ pub fn status_schema() -> Value {
                       "description": "0 chasing, 1 pit, 2 stabilising, 3 aborted, 4 done"},
             "mpc_status": uint("MPC status this step (0 not run, then MpcStatus order + 1)"),
             "faults": uint("bits: 1 stale state, 2 deadline missed, 4 solver failure, 8 peer dead, 16 no state, 32 bad state"),
+            "events": uint("bits: 1 entered stabilisation, 2 decision infeasible (abort)"),
+            "_reserved": uint("unused"),
         }),
     )
 }

@@ -1,0 +1,326 @@
+//! Service names and the iceoryx2 ports of each process.
+//!
+//! Every service lives under a configurable prefix (`picopit` by default), so several runs
+//! (tests, a soak beside a trial) share one host without meeting:
+//!
+//! | service                         | pattern        | payload            | publisher  |
+//! |---------------------------------|----------------|--------------------|------------|
+//! | `<prefix>/state`                | publish-subscribe | [`StateEstimate`]  | vehicle    |
+//! | `<prefix>/command`              | publish-subscribe | [`ActuatorCommand`]| controller |
+//! | `<prefix>/status`               | publish-subscribe | [`ControllerStatus`]| controller |
+//! | `<prefix>/heartbeat/controller` | publish-subscribe | [`Heartbeat`]      | controller |
+//! | `<prefix>/heartbeat/vehicle`    | publish-subscribe | [`Heartbeat`]      | vehicle    |
+//! | `<prefix>/state/ready`          | event          | —                  | vehicle    |
+//! | `<prefix>/command/ready`        | event          | —                  | controller |
+//!
+//! Publishing is loan → write → send; the events wake the other side at once (no polling).
+//! All services are opened with the same quality-of-service settings by [`open_pubsub`], so
+//! either side (and a recorder) may start first.
+
+use crate::msg::{ActuatorCommand, ControllerStatus, Heartbeat, StateEstimate};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+use std::fmt::Debug;
+use std::time::Duration;
+
+/// The iceoryx2 service flavour: inter-process, shared memory.
+pub type Svc = ipc::Service;
+
+/// Samples a subscriber buffers before the oldest is overwritten (safe overflow): the
+/// controller only wants the newest state; the recorder drains every few milliseconds.
+pub const SUBSCRIBER_BUFFER: usize = 64;
+/// Subscribers per service: the peer, the two recorders and room for tools and tests.
+pub const MAX_SUBSCRIBERS: usize = 8;
+
+/// A failure to set up a port (at start-up only; never on the hot path).
+#[derive(Debug, thiserror::Error)]
+pub enum PortError {
+    #[error("service prefix {prefix:?}: {reason}")]
+    Prefix { prefix: String, reason: String },
+    #[error("iceoryx2 node: {0}")]
+    Node(String),
+    #[error("iceoryx2 service `{service}`: {reason}")]
+    Service { service: String, reason: String },
+}
+
+/// A publish or receive failure on the hot path (small and `Copy`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum IoFault {
+    #[error("loaning a sample failed")]
+    Loan,
+    #[error("sending a sample failed")]
+    Send,
+    #[error("receiving a sample failed")]
+    Receive,
+    #[error("notifying the peer failed")]
+    Notify,
+    #[error("waiting for an event failed")]
+    Wait,
+}
+
+/// The names of all services under one prefix.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ServiceNames {
+    pub state: String,
+    pub command: String,
+    pub status: String,
+    pub heartbeat_controller: String,
+    pub heartbeat_vehicle: String,
+    pub state_ready: String,
+    pub command_ready: String,
+}
+
+impl ServiceNames {
+    /// The names under `prefix` (1–64 characters of `[A-Za-z0-9_-]`, `/` separating parts).
+    ///
+    /// # Errors
+    /// [`PortError::Prefix`] for an empty, long or oddly spelled prefix.
+    pub fn new(prefix: &str) -> Result<Self, PortError> {
+        let ok = !prefix.is_empty()
+            && prefix.len() <= 64
+            && !prefix.starts_with('/')
+            && !prefix.ends_with('/')
+            && !prefix.contains("//")
+            && prefix
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '/'));
+        if !ok {
+            return Err(PortError::Prefix {
+                prefix: prefix.to_owned(),
+                reason:
+                    "must be 1–64 characters of A–Z, a–z, 0–9, `_`, `-`, with `/` between parts"
+                        .to_owned(),
+            });
+        }
+        let n = |s: &str| format!("{prefix}/{s}");
+        Ok(Self {
+            state: n("state"),
+            command: n("command"),
+            status: n("status"),
+            heartbeat_controller: n("heartbeat/controller"),
+            heartbeat_vehicle: n("heartbeat/vehicle"),
+            state_ready: n("state/ready"),
+            command_ready: n("command/ready"),
+        })
+    }
+}
+
+fn service_err(service: &str, e: impl Debug) -> PortError {
+    PortError::Service {
+        service: service.to_owned(),
+        reason: format!("{e:?}"),
+    }
+}
+
+/// A node for this process (signals: SIGINT/SIGTERM are caught and reported by
+/// [`Node::wait`], see [`termination_requested`]).
+///
+/// # Errors
+/// [`PortError::Node`] when iceoryx2 cannot create it.
+pub fn node(name: &str) -> Result<Node<Svc>, PortError> {
+    let name: NodeName = name
+        .try_into()
+        .map_err(|e| PortError::Node(format!("node name {name:?}: {e:?}")))?;
+    NodeBuilder::new()
+        .name(&name)
+        .create::<Svc>()
+        .map_err(|e| PortError::Node(format!("{e:?}")))
+}
+
+/// Whether SIGINT or SIGTERM has arrived (checked without blocking).
+#[must_use]
+pub fn termination_requested(node: &Node<Svc>) -> bool {
+    node.wait(Duration::ZERO).is_err()
+}
+
+/// Open (or create) a publish-subscribe service with the shared quality of service.
+///
+/// # Errors
+/// [`PortError::Service`] naming the service.
+pub fn open_pubsub<T: Debug + Copy + ZeroCopySend + 'static>(
+    node: &Node<Svc>,
+    name: &str,
+) -> Result<PortFactory<Svc, T, ()>, PortError> {
+    let sname: ServiceName = name.try_into().map_err(|e| service_err(name, e))?;
+    node.service_builder(&sname)
+        .publish_subscribe::<T>()
+        .max_publishers(1)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+        .history_size(1)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| service_err(name, e))
+}
+
+/// A publisher on `name`.
+///
+/// # Errors
+/// [`PortError::Service`] naming the service (e.g. a second publisher).
+pub fn publisher<T: Debug + Copy + ZeroCopySend + 'static>(
+    node: &Node<Svc>,
+    name: &str,
+) -> Result<Publisher<Svc, T, ()>, PortError> {
+    open_pubsub::<T>(node, name)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| service_err(name, e))
+}
+
+/// A subscriber on `name`.
+///
+/// # Errors
+/// [`PortError::Service`] naming the service.
+pub fn subscriber<T: Debug + Copy + ZeroCopySend + 'static>(
+    node: &Node<Svc>,
+    name: &str,
+) -> Result<Subscriber<Svc, T, ()>, PortError> {
+    open_pubsub::<T>(node, name)?
+        .subscriber_builder()
+        .buffer_size(SUBSCRIBER_BUFFER)
+        .create()
+        .map_err(|e| service_err(name, e))
+}
+
+fn event(
+    node: &Node<Svc>,
+    name: &str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, PortError> {
+    let sname: ServiceName = name.try_into().map_err(|e| service_err(name, e))?;
+    node.service_builder(&sname)
+        .event()
+        .open_or_create()
+        .map_err(|e| service_err(name, e))
+}
+
+/// Loan a sample, write `value` into it and send it (no copy through the heap).
+///
+/// # Errors
+/// [`IoFault::Loan`] or [`IoFault::Send`].
+pub fn publish<T: Debug + Copy + ZeroCopySend + 'static>(
+    p: &Publisher<Svc, T, ()>,
+    value: T,
+) -> Result<(), IoFault> {
+    let sample = p.loan_uninit().map_err(|_| IoFault::Loan)?;
+    let sample = sample.write_payload(value);
+    sample.send().map(|_| ()).map_err(|_| IoFault::Send)
+}
+
+/// Receive every pending sample and keep the newest (`None` when there was none).
+///
+/// # Errors
+/// [`IoFault::Receive`].
+pub fn newest<T: Debug + Copy + ZeroCopySend + 'static>(
+    s: &Subscriber<Svc, T, ()>,
+) -> Result<Option<T>, IoFault> {
+    let mut last = None;
+    while let Some(sample) = s.receive().map_err(|_| IoFault::Receive)? {
+        last = Some(*sample.payload());
+    }
+    Ok(last)
+}
+
+/// Wait until `listener` fires or `timeout` passes; returns whether it fired.
+///
+/// # Errors
+/// [`IoFault::Wait`].
+pub fn wait_event(listener: &Listener<Svc>, timeout: Duration) -> Result<bool, IoFault> {
+    let mut fired = false;
+    listener
+        .timed_wait(|_| fired = true, timeout)
+        .map_err(|_| IoFault::Wait)?;
+    Ok(fired)
+}
+
+/// The controller's ports.
+pub struct ControllerPorts {
+    pub node: Node<Svc>,
+    pub state: Subscriber<Svc, StateEstimate, ()>,
+    pub state_ready: Listener<Svc>,
+    pub command: Publisher<Svc, ActuatorCommand, ()>,
+    pub command_ready: Notifier<Svc>,
+    pub status: Publisher<Svc, ControllerStatus, ()>,
+    pub heartbeat: Publisher<Svc, Heartbeat, ()>,
+    pub vehicle_heartbeat: Subscriber<Svc, Heartbeat, ()>,
+}
+
+impl ControllerPorts {
+    /// Open every port of the controller under `names`.
+    ///
+    /// # Errors
+    /// [`PortError`] naming the service at fault.
+    pub fn open(names: &ServiceNames) -> Result<Self, PortError> {
+        let node = node("pit-controller")?;
+        Ok(Self {
+            state: subscriber(&node, &names.state)?,
+            state_ready: event(&node, &names.state_ready)?
+                .listener_builder()
+                .create()
+                .map_err(|e| service_err(&names.state_ready, e))?,
+            command: publisher(&node, &names.command)?,
+            command_ready: event(&node, &names.command_ready)?
+                .notifier_builder()
+                .create()
+                .map_err(|e| service_err(&names.command_ready, e))?,
+            status: publisher(&node, &names.status)?,
+            heartbeat: publisher(&node, &names.heartbeat_controller)?,
+            vehicle_heartbeat: subscriber(&node, &names.heartbeat_vehicle)?,
+            node,
+        })
+    }
+}
+
+/// The vehicle side's ports.
+pub struct VehiclePorts {
+    pub node: Node<Svc>,
+    pub state: Publisher<Svc, StateEstimate, ()>,
+    pub state_ready: Notifier<Svc>,
+    pub command: Subscriber<Svc, ActuatorCommand, ()>,
+    pub command_ready: Listener<Svc>,
+    pub status: Subscriber<Svc, ControllerStatus, ()>,
+    pub heartbeat: Publisher<Svc, Heartbeat, ()>,
+    pub controller_heartbeat: Subscriber<Svc, Heartbeat, ()>,
+}
+
+impl VehiclePorts {
+    /// Open every port of the vehicle side under `names`.
+    ///
+    /// # Errors
+    /// [`PortError`] naming the service at fault.
+    pub fn open(names: &ServiceNames) -> Result<Self, PortError> {
+        let node = node("pit-vehicle")?;
+        Ok(Self {
+            state: publisher(&node, &names.state)?,
+            state_ready: event(&node, &names.state_ready)?
+                .notifier_builder()
+                .create()
+                .map_err(|e| service_err(&names.state_ready, e))?,
+            command: subscriber(&node, &names.command)?,
+            command_ready: event(&node, &names.command_ready)?
+                .listener_builder()
+                .create()
+                .map_err(|e| service_err(&names.command_ready, e))?,
+            status: subscriber(&node, &names.status)?,
+            heartbeat: publisher(&node, &names.heartbeat_vehicle)?,
+            controller_heartbeat: subscriber(&node, &names.heartbeat_controller)?,
+            node,
+        })
+    }
+}
+
+/// `CLOCK_MONOTONIC` in nanoseconds: the same clock in every process of the host.
+#[must_use]
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC is always available on Linux.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    debug_assert_eq!(rc, 0, "clock_gettime(CLOCK_MONOTONIC) cannot fail");
+    (ts.tv_sec as u64) * 1_000_000_000 + ts.tv_nsec as u64
+}

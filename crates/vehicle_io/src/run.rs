@@ -1,0 +1,561 @@
+//! The two processes' loops over their ports: [`run_controller`] and [`run_vehicle`]. The
+//! binaries parse their command lines and call these; the logic lives in
+//! [`crate::control::ControlLoop`] and [`crate::vehicle`].
+
+use crate::config::{secs_to_ns, ControllerClock, VehicleClock, VehicleIoSettings};
+use crate::control::{ControlLoop, Counters, CycleInput};
+use crate::msg::{
+    ActuatorCommand, Heartbeat, StateEstimate, PEER_CONTROLLER, PEER_VEHICLE, STATE_FINISHED,
+    STATE_RESTARTED,
+};
+use crate::ports::{
+    monotonic_ns, newest, publish, termination_requested, wait_event, ControllerPorts, IoFault,
+    VehiclePorts,
+};
+use crate::vehicle::{Actuation, CommandGate, SafeStopReason, VehicleBridge};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+use std::time::Duration;
+
+/// Median, 99th percentile and maximum of a sample (NaN when empty).
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct Stats {
+    pub count: usize,
+    pub median: f64,
+    pub p99: f64,
+    pub max: f64,
+}
+
+impl Stats {
+    /// Of `v` (sorted in place); linear interpolation between order statistics.
+    #[must_use]
+    pub fn of(v: &mut [f64]) -> Self {
+        v.sort_by(f64::total_cmp);
+        Self {
+            count: v.len(),
+            median: sim::episode::percentile(v, 50.0),
+            p99: sim::episode::percentile(v, 99.0),
+            max: v.last().copied().unwrap_or(f64::NAN),
+        }
+    }
+}
+
+/// Peak and current resident memory of this process (KiB, from `/proc/self/status`).
+#[must_use]
+pub fn resident_kib() -> (u64, u64) {
+    let text = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let field = |name: &str| {
+        text.lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0)
+    };
+    (field("VmHWM:"), field("VmRSS:"))
+}
+
+/// How a loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Ending {
+    /// The run is over (the vehicle's judge decided).
+    Finished,
+    /// SIGINT or SIGTERM.
+    Interrupted,
+    /// The peer never showed up.
+    NoPeer,
+    /// The time limit passed.
+    TimeLimit,
+    /// The transport failed.
+    Transport,
+}
+
+/// What the controller did.
+#[derive(Debug, Clone, Serialize)]
+pub struct ControllerSummary {
+    pub ending: Ending,
+    pub cycles: u64,
+    pub solves: u64,
+    pub deadline_misses: u32,
+    pub fallbacks: u32,
+    pub stale_states: u32,
+    pub solver_failures: u32,
+    pub states_received: u64,
+    /// Control-step time, planning included (ms), over the solving cycles.
+    pub cycle_ms: Stats,
+    /// Planning time of the cycles that replanned (ms).
+    pub plan_ms: Stats,
+    pub peak_rss_kib: u64,
+    pub rss_kib: u64,
+}
+
+fn heartbeat(peer: u32) -> Heartbeat {
+    Heartbeat {
+        peer,
+        pid: std::process::id(),
+        ..Heartbeat::default()
+    }
+}
+
+fn beat(
+    p: &iceoryx2::port::publisher::Publisher<crate::ports::Svc, Heartbeat, ()>,
+    hb: &mut Heartbeat,
+    vehicle_ns: u64,
+) -> Result<(), IoFault> {
+    hb.seq += 1;
+    hb.wall_sent_ns = monotonic_ns();
+    hb.vehicle_ns = vehicle_ns;
+    publish(p, *hb)
+}
+
+/// The controller's loop: wake on each vehicle event, answer every new state with a
+/// command and a status, fall back when the state goes stale or the peer dies.
+///
+/// Memory: `max_cycles` samples of cycle and planning times, preallocated; the loop
+/// allocates nothing else (the ports are iceoryx2 shared memory).
+pub fn run_controller(
+    lp: &mut ControlLoop,
+    ports: &ControllerPorts,
+    max_cycles: usize,
+) -> ControllerSummary {
+    let s = lp.settings().clone();
+    let period = Duration::from_secs_f64(s.period);
+    let peer_timeout_ns = secs_to_ns(s.peer_timeout);
+    let stale_ns = s.stale_ns();
+    let mut cycle_ms = Vec::with_capacity(max_cycles);
+    let mut plan_ms = Vec::with_capacity(max_cycles);
+    let mut hb = heartbeat(PEER_CONTROLLER);
+    let mut latest: Option<StateEstimate> = None;
+    let mut latest_wall = 0u64;
+    // The newest (vehicle clock, wall clock) pair heard from the vehicle.
+    let mut reference: Option<(u64, u64)> = None;
+    let mut last_hb_wall: Option<u64> = None;
+    let mut states_received = 0u64;
+    let mut last_answered: Option<u64> = None;
+    let ending = loop {
+        if beat(&ports.heartbeat, &mut hb, 0).is_err() {
+            break Ending::Transport;
+        }
+        let Ok(_fired) = wait_event(&ports.state_ready, period) else {
+            break Ending::Transport;
+        };
+        if termination_requested(&ports.node) {
+            break Ending::Interrupted;
+        }
+        let wall = monotonic_ns();
+        let mut new_state = false;
+        loop {
+            match ports.state.receive() {
+                Ok(Some(sample)) => {
+                    let st = *sample.payload();
+                    states_received += 1;
+                    if latest.is_none_or(|l| st.seq > l.seq) {
+                        if st.flags & STATE_RESTARTED != 0 {
+                            lp.reset();
+                        }
+                        latest = Some(st);
+                        latest_wall = wall;
+                        new_state = true;
+                        if reference.is_none_or(|(v, _)| st.sent_ns >= v) {
+                            reference = Some((st.sent_ns, st.wall_sent_ns));
+                        }
+                    }
+                }
+                Ok(None) => break,
+                Err(_) => break,
+            }
+        }
+        if let Ok(Some(h)) = newest(&ports.vehicle_heartbeat) {
+            last_hb_wall = Some(wall);
+            if reference.is_none_or(|(v, _)| h.vehicle_ns >= v) {
+                reference = Some((h.vehicle_ns, h.wall_sent_ns));
+            }
+        }
+        let Some((ref_vehicle, ref_wall)) = reference else {
+            continue;
+        };
+        let now_ns = match s.clock {
+            ControllerClock::Vehicle => ref_vehicle,
+            ControllerClock::Wall => ref_vehicle + wall.saturating_sub(ref_wall),
+        };
+        let peer_alive =
+            last_hb_wall.is_some_and(|t| wall.saturating_sub(t) <= peer_timeout_ns) || new_state;
+        let stale = latest.is_none_or(|l| now_ns.saturating_sub(l.stamp_ns) > stale_ns);
+        // Answer each new state once; without one, speak only to fall back.
+        if !(new_state || stale || !peer_alive) {
+            continue;
+        }
+        if !new_state
+            && latest.is_some_and(|l| last_answered == Some(l.seq))
+            && !stale
+            && peer_alive
+        {
+            continue;
+        }
+        let (mut cmd, status) = lp.step(&CycleInput {
+            state: latest.as_ref(),
+            now_ns,
+            wall_received_ns: latest_wall,
+            peer_alive,
+        });
+        last_answered = latest.map(|l| l.seq);
+        cmd.wall_sent_ns = monotonic_ns();
+        let sent = publish(&ports.command, cmd)
+            .and_then(|()| publish(&ports.status, status))
+            .and_then(|()| {
+                ports
+                    .command_ready
+                    .notify()
+                    .map(|_| ())
+                    .map_err(|_| IoFault::Notify)
+            });
+        if sent.is_err() {
+            break Ending::Transport;
+        }
+        if new_state && cycle_ms.len() < max_cycles {
+            cycle_ms.push(cmd.wall_sent_ns.saturating_sub(latest_wall) as f64 * 1e-6);
+            if status.plan_ns > 0 {
+                plan_ms.push(status.plan_ns as f64 * 1e-6);
+            }
+        }
+        if s.exit_when_finished && latest.is_some_and(|l| l.flags & STATE_FINISHED != 0) {
+            break Ending::Finished;
+        }
+    };
+    let c: Counters = lp.counters();
+    let (peak, rss) = resident_kib();
+    ControllerSummary {
+        ending,
+        cycles: c.cycles,
+        solves: c.solves,
+        deadline_misses: c.deadline_misses,
+        fallbacks: c.fallbacks,
+        stale_states: c.stale_states,
+        solver_failures: c.solver_failures,
+        states_received,
+        cycle_ms: Stats::of(&mut cycle_ms),
+        plan_ms: Stats::of(&mut plan_ms),
+        peak_rss_kib: peak,
+        rss_kib: rss,
+    }
+}
+
+/// The vehicle's safe stop, as it happened.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct SafeStopReport {
+    pub reason: SafeStopReason,
+    /// Vehicle time of the latch (s).
+    pub at: f64,
+    /// Vehicle time the bullet came to rest (< 0.1 m/s), if it did (s).
+    pub stopped_at: Option<f64>,
+    /// Bullet speed at the latch (m/s).
+    pub speed_at_latch: f64,
+}
+
+/// What the vehicle side did.
+#[derive(Debug, Clone, Serialize)]
+pub struct VehicleSummary {
+    pub ending: Ending,
+    /// Vehicle time at the end (s).
+    pub time: f64,
+    pub periods: u64,
+    pub states_published: u64,
+    pub states_dropped: u64,
+    pub commands_received: u64,
+    pub commands_applied: u64,
+    pub commands_stale: u64,
+    /// Simulated clock: periods whose answer did not come within `lockstep_timeout`.
+    pub lockstep_misses: u64,
+    /// Soak: scenario restarts.
+    pub restarts: u64,
+    pub safe_stop: Option<SafeStopReport>,
+    pub final_bullet_speed: f64,
+    /// IPC latency of a control cycle excluding the controller's own time: state publish →
+    /// command receive, minus (command send − state receive) (µs).
+    pub ipc_us: Stats,
+    /// State transit (vehicle publish → controller receive) and command transit (µs).
+    pub state_transit_us: Stats,
+    pub command_transit_us: Stats,
+    /// Wall time from state publish to the answering command, the solve included (ms).
+    pub round_trip_ms: Stats,
+    pub peak_rss_kib: u64,
+}
+
+/// Latency samples, preallocated.
+struct Latencies {
+    sent_wall: Vec<u64>,
+    ipc: Vec<f64>,
+    state: Vec<f64>,
+    command: Vec<f64>,
+    round: Vec<f64>,
+}
+
+const SENT_RING: usize = 256;
+
+impl Latencies {
+    fn new(n: usize) -> Self {
+        Self {
+            sent_wall: vec![0; SENT_RING],
+            ipc: Vec::with_capacity(n),
+            state: Vec::with_capacity(n),
+            command: Vec::with_capacity(n),
+            round: Vec::with_capacity(n),
+        }
+    }
+
+    fn sent(&mut self, seq: u64, wall: u64) {
+        self.sent_wall[(seq % SENT_RING as u64) as usize] = wall;
+    }
+
+    fn answered(&mut self, cmd: &ActuatorCommand, recv_wall: u64, newest_seq: u64) {
+        if self.ipc.len() == self.ipc.capacity()
+            || newest_seq.saturating_sub(cmd.state_seq) >= SENT_RING as u64
+        {
+            return;
+        }
+        let sent = self.sent_wall[(cmd.state_seq % SENT_RING as u64) as usize];
+        if sent == 0
+            || cmd.wall_state_received_ns < sent
+            || cmd.wall_sent_ns < cmd.wall_state_received_ns
+        {
+            return;
+        }
+        let round = recv_wall.saturating_sub(sent) as f64;
+        let solve = (cmd.wall_sent_ns - cmd.wall_state_received_ns) as f64;
+        self.ipc.push((round - solve) * 1e-3);
+        self.state
+            .push((cmd.wall_state_received_ns - sent) as f64 * 1e-3);
+        self.command
+            .push(recv_wall.saturating_sub(cmd.wall_sent_ns) as f64 * 1e-3);
+        self.round.push(round * 1e-6);
+    }
+}
+
+/// The vehicle side's loop: publish the state every period, apply the newest valid
+/// command, stop safely when commands stop; ends when the bridge says the run is over (and
+/// a latched safe stop has brought the bullet to rest), on SIGINT/SIGTERM, or at
+/// `max_time` seconds of vehicle time.
+pub fn run_vehicle<B: VehicleBridge>(
+    s: &VehicleIoSettings,
+    bridge: &mut B,
+    ports: &VehiclePorts,
+    max_time: f64,
+) -> VehicleSummary {
+    let period_ns = secs_to_ns(s.period);
+    let step_ns = bridge.step_ns().max(1);
+    let steps_per = (period_ns / step_ns).max(1) as usize;
+    // Real time: apply commands on arrival, at the next 5 ms sub-tick.
+    let sub_steps = ((5_000_000 / step_ns).max(1) as usize).min(steps_per);
+    let max_periods = (max_time / s.period).ceil() as usize + 2;
+    let mut lat = Latencies::new(max_periods);
+    let mut rng = ChaCha8Rng::seed_from_u64(s.seed ^ 0x5eed_fa17);
+    let mut hb = heartbeat(PEER_VEHICLE);
+    let mut summary = VehicleSummary {
+        ending: Ending::Finished,
+        time: 0.0,
+        periods: 0,
+        states_published: 0,
+        states_dropped: 0,
+        commands_received: 0,
+        commands_applied: 0,
+        commands_stale: 0,
+        lockstep_misses: 0,
+        restarts: 0,
+        safe_stop: None,
+        final_bullet_speed: 0.0,
+        ipc_us: Stats::of(&mut []),
+        state_transit_us: Stats::of(&mut []),
+        command_transit_us: Stats::of(&mut []),
+        round_trip_ms: Stats::of(&mut []),
+        peak_rss_kib: 0,
+    };
+
+    // Wait for the controller.
+    let connect_deadline = monotonic_ns() + secs_to_ns(s.connect_timeout);
+    let connected = loop {
+        let _ = beat(&ports.heartbeat, &mut hb, 0);
+        if matches!(newest(&ports.controller_heartbeat), Ok(Some(_))) {
+            break true;
+        }
+        if termination_requested(&ports.node) || monotonic_ns() > connect_deadline {
+            break false;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    if !connected {
+        summary.ending = if termination_requested(&ports.node) {
+            Ending::Interrupted
+        } else {
+            Ending::NoPeer
+        };
+        return summary;
+    }
+
+    let mut gate = CommandGate::new(secs_to_ns(s.command_timeout), bridge.now_ns());
+    let mut stopped_at: Option<f64> = None;
+    let mut latch_speed = 0.0;
+    let wall0 = monotonic_ns();
+    let mut seq = 0u64;
+    let stall = (
+        secs_to_ns(s.faults.stall_at),
+        secs_to_ns(s.faults.stall_at + s.faults.stall_for),
+    );
+    let mut finished = false;
+    let mut restarted = false;
+    summary.restarts = 0;
+    summary.ending = loop {
+        let now = bridge.now_ns();
+        let mut st = StateEstimate::default();
+        bridge.measure(&mut st);
+        st.seq = seq;
+        st.sent_ns = now;
+        st.flags |= gate.flags();
+        st.commands_applied = u32::try_from(gate.applied).unwrap_or(u32::MAX);
+        let stalled = s.faults.stall_for > 0.0 && now >= stall.0 && now < stall.1;
+        let dropped =
+            stalled || (s.faults.drop_states > 0.0 && rng.random::<f64>() < s.faults.drop_states);
+        if finished {
+            st.flags |= STATE_FINISHED;
+        }
+        if restarted {
+            st.flags |= STATE_RESTARTED;
+            restarted = false;
+        }
+        if dropped && !finished {
+            summary.states_dropped += 1;
+        } else {
+            st.wall_sent_ns = monotonic_ns();
+            lat.sent(seq, st.wall_sent_ns);
+            if publish(&ports.state, st).is_err() {
+                break Ending::Transport;
+            }
+            summary.states_published += 1;
+        }
+        let _ = beat(&ports.heartbeat, &mut hb, now);
+        let _ = ports.state_ready.notify();
+        if finished {
+            break Ending::Finished;
+        }
+
+        match s.clock {
+            VehicleClock::Simulated => {
+                let waiting = !dropped && gate.latched().is_none();
+                let deadline = monotonic_ns() + secs_to_ns(s.lockstep_timeout);
+                let mut answered = drain(ports, bridge, &mut gate, &mut lat, seq);
+                while waiting && !answered {
+                    let now_wall = monotonic_ns();
+                    if now_wall >= deadline || termination_requested(&ports.node) {
+                        break;
+                    }
+                    let _ = wait_event(
+                        &ports.command_ready,
+                        Duration::from_nanos(deadline - now_wall),
+                    );
+                    answered = drain(ports, bridge, &mut gate, &mut lat, seq);
+                }
+                if waiting && !answered {
+                    summary.lockstep_misses += 1;
+                }
+                apply(bridge, gate.decide(bridge.now_ns()));
+                bridge.step(steps_per);
+            }
+            VehicleClock::Wall => {
+                let mut done = 0;
+                while done < steps_per {
+                    let n = sub_steps.min(steps_per - done);
+                    let tick_end = wall0 + seq * period_ns + (done + n) as u64 * step_ns;
+                    loop {
+                        drain(ports, bridge, &mut gate, &mut lat, seq);
+                        let w = monotonic_ns();
+                        if w >= tick_end {
+                            break;
+                        }
+                        let _ =
+                            wait_event(&ports.command_ready, Duration::from_nanos(tick_end - w));
+                    }
+                    apply(bridge, gate.decide(bridge.now_ns()));
+                    bridge.step(n);
+                    done += n;
+                }
+            }
+        }
+        let over = bridge.end_period();
+        seq += 1;
+        summary.periods += 1;
+        let t = bridge.now_ns() as f64 * 1e-9;
+        if let Some((_, at)) = gate.latched() {
+            if summary.safe_stop.is_none() {
+                latch_speed = bridge.bullet_speed();
+                let _ = at;
+            }
+            if stopped_at.is_none() && bridge.bullet_speed() < 0.1 {
+                stopped_at = Some(t);
+            }
+            summary.safe_stop = gate.latched().map(|(reason, at)| SafeStopReport {
+                reason,
+                at: at as f64 * 1e-9,
+                stopped_at,
+                speed_at_latch: latch_speed,
+            });
+        }
+        if termination_requested(&ports.node) {
+            break Ending::Interrupted;
+        }
+        // Over when judged, but a vehicle stopping itself comes to rest first.
+        if over && (gate.latched().is_none() || stopped_at.is_some()) {
+            if summary.periods < s.soak_periods && gate.latched().is_none() && bridge.restart() {
+                summary.restarts += 1;
+                restarted = true;
+                continue;
+            }
+            finished = true;
+            continue;
+        }
+        if t >= max_time {
+            break Ending::TimeLimit;
+        }
+    };
+    summary.time = bridge.now_ns() as f64 * 1e-9;
+    summary.commands_received = gate.received;
+    summary.commands_applied = gate.applied;
+    summary.commands_stale = gate.stale;
+    summary.final_bullet_speed = bridge.bullet_speed();
+    summary.ipc_us = Stats::of(&mut lat.ipc);
+    summary.state_transit_us = Stats::of(&mut lat.state);
+    summary.command_transit_us = Stats::of(&mut lat.command);
+    summary.round_trip_ms = Stats::of(&mut lat.round);
+    summary.peak_rss_kib = resident_kib().0;
+    summary
+}
+
+/// Receive every pending command, offer it to the gate at vehicle time `now_ns`; returns
+/// whether one answered state `seq` (or a newer one).
+fn drain<B: VehicleBridge>(
+    ports: &VehiclePorts,
+    bridge: &mut B,
+    gate: &mut CommandGate,
+    lat: &mut Latencies,
+    seq: u64,
+) -> bool {
+    let now_ns = bridge.now_ns();
+    while let Ok(Some(sample)) = ports.status.receive() {
+        bridge.controller_events(sample.payload().events);
+    }
+    let mut answered = false;
+    while let Ok(Some(sample)) = ports.command.receive() {
+        let cmd = *sample.payload();
+        lat.answered(&cmd, monotonic_ns(), seq);
+        answered |= cmd.state_seq >= seq;
+        gate.offer(&cmd, now_ns);
+    }
+    answered
+}
+
+fn apply<B: VehicleBridge>(bridge: &mut B, a: Actuation) {
+    match a {
+        Actuation::Command([steer, torque]) => bridge.actuate(steer, torque),
+        Actuation::Hold => {}
+        Actuation::SafeStop => bridge.safe_stop(),
+    }
+}
