@@ -17,18 +17,17 @@
 //! default, or a simulated tick clock ([`ClockKind::Simulated`]), with which an episode is
 //! bit-for-bit reproducible (the solvers' wall-clock limits are lifted in that mode).
 
-use crate::outcome::{FailureCause, Metrics, Monitor, Outcome, Status};
+use crate::outcome::{FailureCause, Metrics, Outcome, Status};
 use crate::scenario::{ParamSetName, Scenario, ScenarioError};
+use crate::vehicle::{bullet_array, SimVehicle};
 use dynamics::params::ParamSet;
-use dynamics::plant::{Plant, PlantConfig};
 use dynamics::target4dof::FourDofTarget;
-use dynamics::{TargetInput, TargetModel, TargetState};
+use dynamics::{TargetInput, TargetModel};
 use mpc::{MpcStatus, TickClock};
 use planner::{AbortReason, ControllerInput, ControllerSettings, Phase, PitController};
-use rand::{Rng, RngCore, SeedableRng};
+use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use thiserror::Error;
@@ -141,7 +140,9 @@ pub struct Uncertainty {
 }
 
 impl Uncertainty {
-    fn validate(&self) -> Result<(), EpisodeError> {
+    /// # Errors
+    /// [`EpisodeError::Config`] naming the field (`uncertainty.latency`, …) out of range.
+    pub fn validate(&self) -> Result<(), EpisodeError> {
         for (field, value, max) in [
             ("uncertainty.position_std", self.position_std, 10.0),
             ("uncertainty.heading_std", self.heading_std, 1.0),
@@ -162,7 +163,7 @@ impl Uncertainty {
         Ok(())
     }
 
-    fn has_noise(&self) -> bool {
+    pub(crate) fn has_noise(&self) -> bool {
         self.position_std > 0.0
             || self.heading_std > 0.0
             || self.speed_std > 0.0
@@ -523,21 +524,6 @@ pub fn run_episode(
     Ok(r)
 }
 
-/// A standard normal draw (Box–Muller; two uniforms per draw, for a simple fixed order).
-fn gauss<R: RngCore + ?Sized>(rng: &mut R) -> f64 {
-    let u1: f64 = 1.0 - rng.random::<f64>();
-    let u2: f64 = rng.random::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-}
-
-fn uniform_pm<R: RngCore + ?Sized>(rng: &mut R, half: f64) -> f64 {
-    if half > 0.0 {
-        half * (2.0 * rng.random::<f64>() - 1.0)
-    } else {
-        0.0
-    }
-}
-
 /// Load one target model for the controller.
 fn load_model(
     config: &EpisodeConfig,
@@ -545,12 +531,33 @@ fn load_model(
     params: &ParamSet,
     dt: f64,
 ) -> Result<Box<dyn TargetModel + Send + Sync>, EpisodeError> {
-    let path = match (
-        &config.model_path,
-        config.model.file(&config.models_dir, sc.params),
-    ) {
+    target_model(
+        config.model,
+        &config.models_dir,
+        config.model_path.as_deref(),
+        sc,
+        params,
+        dt,
+    )
+}
+
+/// The controller's target model of kind `model` for scenario `sc` (its parameter set and
+/// μ) with step `dt`: the 4-DOF model, or the surrogate file under `models_dir` (or
+/// `model_path` instead, when given).
+///
+/// # Errors
+/// [`EpisodeError::Model`] naming the file that cannot be loaded or does not cover μ.
+pub fn target_model(
+    model: ModelKind,
+    models_dir: &Path,
+    model_path: Option<&Path>,
+    sc: &Scenario,
+    params: &ParamSet,
+    dt: f64,
+) -> Result<Box<dyn TargetModel + Send + Sync>, EpisodeError> {
+    let path = match (model_path, model.file(models_dir, sc.params)) {
         (_, None) => return Ok(Box::new(FourDofTarget::new(&params.target, sc.mu, dt))),
-        (Some(p), Some(_)) => p.clone(),
+        (Some(p), Some(_)) => p.to_path_buf(),
         (None, Some(p)) => p,
     };
     pico_nn::SurrogateModel::from_path(&path)
@@ -560,58 +567,6 @@ fn load_model(
             path,
             message: e.to_string(),
         })
-}
-
-/// What the sensors report: the true states delayed by the latency, plus noise.
-struct Sensor {
-    buf: VecDeque<(TargetState, [f64; 6])>,
-    delay_steps: usize,
-}
-
-impl Sensor {
-    fn new(delay_steps: usize, target: TargetState, bullet: [f64; 6]) -> Self {
-        let mut buf = VecDeque::with_capacity(delay_steps + 2);
-        buf.push_back((target, bullet));
-        Self { buf, delay_steps }
-    }
-
-    fn push(&mut self, target: TargetState, bullet: [f64; 6]) {
-        self.buf.push_back((target, bullet));
-        while self.buf.len() > self.delay_steps + 1 {
-            self.buf.pop_front();
-        }
-    }
-
-    /// The delayed states (the oldest kept sample).
-    fn read(&self) -> (TargetState, [f64; 6]) {
-        self.buf
-            .front()
-            .copied()
-            .unwrap_or_else(|| unreachable!("the sensor buffer always holds the initial sample"))
-    }
-}
-
-fn add_noise<R: RngCore + ?Sized>(
-    u: &Uncertainty,
-    rng: &mut R,
-    xt: &mut TargetState,
-    xb: &mut [f64; 6],
-) {
-    // Fixed draw order: target vx vy ψ r p X Y, bullet X Y ψ vx vy r.
-    let mut draw = |std: f64| std * gauss(rng);
-    xt[0] += draw(u.speed_std);
-    xt[1] += draw(u.speed_std);
-    xt[2] += draw(u.heading_std);
-    xt[3] += draw(u.yaw_rate_std);
-    xt[4] += draw(u.yaw_rate_std);
-    xt[6] += draw(u.position_std);
-    xt[7] += draw(u.position_std);
-    xb[0] += draw(u.position_std);
-    xb[1] += draw(u.position_std);
-    xb[2] += draw(u.heading_std);
-    xb[3] += draw(u.speed_std);
-    xb[4] += draw(u.speed_std);
-    xb[5] += draw(u.yaw_rate_std);
 }
 
 /// Run one episode drawing all randomness (sensing noise, actuator errors) from `rng`.
@@ -650,33 +605,9 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
     let model = ctl.target_model_name().to_owned();
     let param_count = ctl.target_param_count();
 
-    let mut plant = Plant::new(
-        &params,
-        PlantConfig {
-            mu: sc.mu,
-            ..PlantConfig::default()
-        },
-    )
-    .map_err(|e| EpisodeError::Plant(e.to_string()))?;
-    plant.set_obstacles(obstacles.clone());
-    let (bi, ti) = sc.initial_states(&road);
-    plant.reset(&bi, &ti);
-    let mut driver = sc.target_driver(&params);
-    let mut monitor = Monitor::for_scenario(sc)?;
-
-    let plant_dt = plant.dt();
-    let steps_per = (dt / plant_dt).round().max(1.0) as usize;
+    let mut vehicle = SimVehicle::new(sc, config.uncertainty, dt, rng)?;
     let n_steps = (sc.t_max / dt).ceil() as u64 + 1;
-    let u = config.uncertainty;
-    let delay_steps = (u.latency / plant_dt).round() as usize;
-    let mut sensor = Sensor::new(delay_steps, plant.target_state(), bullet_array(&plant));
-    // Actuator errors, drawn once (fixed order: steer gain, steer bias, torque gain).
-    let steer_gain = 1.0 + uniform_pm(rng, u.steer_gain);
-    let steer_bias = uniform_pm(rng, u.steer_bias);
-    let torque_gain = 1.0 + uniform_pm(rng, u.torque_gain);
-    let noisy = u.has_noise();
 
-    let mut first_contact: Option<f64> = None;
     let mut plan_times = Vec::new();
     let mut ctrl_times = Vec::with_capacity(n_steps as usize);
     let mut trajectory = Vec::new();
@@ -687,20 +618,17 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
     let mut status = Status::Running;
 
     while steps < n_steps {
-        let t = plant.time();
-        let truth_target = plant.target_state();
-        let (mut xt, mut xb) = sensor.read();
-        if noisy {
-            add_noise(&u, rng, &mut xt, &mut xb);
-        }
-        let (t_steer, t_brake) = driver.command(t, first_contact, &truth_target, &road);
-        plant.set_target_command(t_steer, t_brake);
+        let t = vehicle.time();
+        let sensed = vehicle.sense(rng);
+        let [t_steer, t_brake] = sensed.target_input;
         let prev_phase = phase;
         let out = ctl
             .step(&ControllerInput {
-                time: t,
-                target: xt,
-                bullet: xb.into(),
+                // On the nanosecond grid of the vehicle I/O's stamps, so that a lock-step
+                // run over IPC sees the very same times.
+                time: ns_time(t),
+                target: sensed.target,
+                bullet: sensed.bullet.into(),
                 target_input: TargetInput::new(t_steer, t_brake),
                 road: &road,
                 obstacles: &obstacles,
@@ -724,40 +652,28 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         }
         if phase == Phase::Stabilising && !stabilising_reported {
             stabilising_reported = true;
-            monitor.enter_stabilisation(t);
+            vehicle.enter_stabilisation(t);
         }
         if prev_phase == Phase::Chasing
             && matches!(out.abort, Some(AbortReason::DecisionInfeasible(_)))
         {
-            status = monitor.decision_infeasible(t);
+            status = vehicle.decision_infeasible(t);
         }
         if let Status::Done(_) = status {
             if config.record {
-                trajectory.push(sample(&plant, &out, [t_steer, t_brake], [0.0; 2], t));
+                trajectory.push(sample(&vehicle, &out, [0.0; 2], t));
             }
             break;
         }
-        let cmd = out.command;
-        plant.set_bullet_command_blended(steer_gain * cmd[0] + steer_bias, torque_gain * cmd[1]);
-        for _ in 0..steps_per {
-            plant.step();
-            monitor.latch(&plant);
-            if first_contact.is_none() && plant.contact().is_some() {
-                first_contact = Some(plant.time());
-            }
-            if delay_steps > 0 {
-                sensor.push(plant.target_state(), bullet_array(&plant));
-            }
-        }
-        if delay_steps == 0 {
-            sensor.push(plant.target_state(), bullet_array(&plant));
-        }
-        let fc = plant
-            .take_contact_average()
-            .map_or([0.0; 2], |c| [c.fc.x, c.fc.y]);
-        status = monitor.observe_plant(&plant);
+        vehicle.actuate([out.command[0], out.command[1]]);
+        status = vehicle.advance();
         if config.record {
-            trajectory.push(sample(&plant, &out, [t_steer, t_brake], fc, plant.time()));
+            trajectory.push(sample(
+                &vehicle,
+                &out,
+                vehicle.contact_force(),
+                vehicle.time(),
+            ));
         }
         if let Status::Done(_) = status {
             break;
@@ -767,7 +683,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         matches!(status, Status::Done(_)),
         "the monitor decides no termination at T_max"
     );
-    let metrics = monitor.metrics();
+    let metrics = vehicle.metrics();
     let plan = TimeStats::of(&mut plan_times.clone());
     let ctrl = TimeStats::of(&mut ctrl_times.clone());
     Ok(EpisodeResult {
@@ -778,7 +694,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         param_count,
         upper_layer: ctl.settings().upper_layer,
         metrics,
-        sim_time: plant.time(),
+        sim_time: vehicle.time(),
         control_steps: steps,
         plan,
         ctrl,
@@ -793,18 +709,18 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
     })
 }
 
-fn bullet_array(plant: &Plant) -> [f64; 6] {
-    let b = plant.bullet_state();
-    [b[0], b[1], b[2], b[3], b[4], b[5]]
+/// Seconds on the nanosecond grid (the vehicle I/O's stamps).
+fn ns_time(t: f64) -> f64 {
+    (t * 1e9).round() * 1e-9
 }
 
 fn sample(
-    plant: &Plant,
+    vehicle: &SimVehicle,
     out: &planner::ControllerOutput,
-    target_command: [f64; 2],
     contact_force: [f64; 2],
     time: f64,
 ) -> Sample {
+    let plant = vehicle.plant();
     let xt = plant.target_state();
     let mut target = [0.0; 8];
     target.copy_from_slice(xt.as_slice());
@@ -813,7 +729,7 @@ fn sample(
         target,
         bullet: bullet_array(plant),
         command: [out.command[0], out.command[1]],
-        target_command,
+        target_command: vehicle.target_command(),
         contact_force,
         phase: out.phase,
         replanned: out.replanned,
@@ -844,21 +760,5 @@ mod tests {
         assert!(percentile(&[], 50.0).is_nan());
         let s = TimeStats::of(&mut [3.0, 1.0, 2.0]);
         assert_eq!((s.count, s.median_ms, s.max_ms), (3, 2.0, 3.0));
-    }
-
-    #[test]
-    fn the_sensor_reports_the_state_of_delay_steps_ago() {
-        let x = |v: f64| (TargetState::from_element(v), [v; 6]);
-        let (t0, b0) = x(0.0);
-        let mut s = Sensor::new(3, t0, b0);
-        for k in 1..=10 {
-            let (t, b) = x(f64::from(k));
-            s.push(t, b);
-            assert_eq!(s.read().1[0], f64::from((k - 3).max(0)), "after {k} pushes");
-        }
-        let mut s = Sensor::new(0, t0, b0);
-        let (t, b) = x(5.0);
-        s.push(t, b);
-        assert_eq!(s.read().0[0], 5.0);
     }
 }

@@ -7,11 +7,14 @@
 //! * [`episode`]: the closed-loop episode runner (plant + controller + success test) and
 //!   its benchmark configurations.
 //! * [`screen`]: rule and short-simulation screening used by the dataset generator.
+//! * [`vehicle`]: the simulated vehicle pair (plant, target driver, sensors, actuators,
+//!   judge) one control period at a time, shared by the episode runner and `pit-vehicle`.
 
 pub mod episode;
 pub mod outcome;
 pub mod scenario;
 pub mod screen;
+pub mod vehicle;
 
 pub use episode::{
     run_episode, ClockKind, EpisodeConfig, EpisodeError, EpisodeResult, ModelKind, Uncertainty,
