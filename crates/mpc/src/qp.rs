@@ -192,6 +192,42 @@ impl Deadline {
 fn arm(solver: &mut DefaultSolver<f64>, deadline: &Arc<Deadline>) {
     let d = Arc::clone(deadline);
     solver.set_termination_callback(move |info: &DefaultInfo<f64>| d.expired(info));
+    prewarm_timers(solver);
+}
+
+/// Every timer name Clarabel 0.11.1 uses inside a solve (`timeit!` in its sources).
+const CLARABEL_TIMERS: [&str; 11] = [
+    "setup",
+    "presolve",
+    "equilibration",
+    "kktinit",
+    "solve",
+    "default start",
+    "IP iteration",
+    "scale cones",
+    "kkt update",
+    "kkt solve",
+    "post-process",
+];
+
+/// Create Clarabel's nested timer entries now, under our root timer, for every name at the
+/// two levels below "solve": a solve that takes a path for the first time (a refinement, a
+/// rarely used branch) then finds its timer and allocates nothing.
+fn prewarm_timers(solver: &mut DefaultSolver<f64>) {
+    if let Some(t) = solver.timers.as_mut() {
+        t.start_as_current(OUTER_TIMER);
+        t.start_as_current("solve");
+        for a in CLARABEL_TIMERS {
+            t.start_as_current(a);
+            for b in CLARABEL_TIMERS {
+                t.start_as_current(b);
+                t.stop_current();
+            }
+            t.stop_current();
+        }
+        t.stop_current();
+        t.stop_current();
+    }
 }
 
 /// What rebuilding the solver from real data needs: P and A patterns, settings, cones.
