@@ -38,3 +38,7 @@ echo "setup: building picopit._core (release) and installing picopit into $VENV"
 # peers casadi (benchmarks/peers); the build shares ./target with cargo.
 maturin develop --release --extras test,train,peers --manifest-path py/Cargo.toml
 python -c 'import picopit; print("setup: picopit ready:", ", ".join(picopit.__all__))'
+
+# The vehicle I/O processes (pit-controller, pit-vehicle): `picopit trials` runs them.
+echo "setup: building pit-controller and pit-vehicle (release)"
+cargo build --release --quiet -p picopit-vehicle-io --bins

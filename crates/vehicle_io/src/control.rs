@@ -247,7 +247,13 @@ impl ControlLoop {
         let (xt, xb) = self.predict(s, comp);
         let prev_phase = self.ctl.phase();
         status.compensated_ns = secs_to_ns(comp);
-        let time = s.stamp_ns.saturating_sub(s.run_start_ns) as f64 * 1e-9 + comp;
+        // The controller's time: when the (predicted) states hold; without compensation the
+        // states are taken as current, so "now".
+        let time = if self.settings.compensate_delay {
+            s.stamp_ns.saturating_sub(s.run_start_ns) as f64 * 1e-9 + comp
+        } else {
+            input.now_ns.saturating_sub(s.run_start_ns) as f64 * 1e-9
+        };
         let out = self.ctl.step(&ControllerInput {
             time,
             target: xt,

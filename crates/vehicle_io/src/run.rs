@@ -440,10 +440,12 @@ pub fn run_vehicle<B: VehicleBridge>(
 
         match s.clock {
             VehicleClock::Simulated => {
-                let waiting = !dropped && gate.latched().is_none();
+                // Wait for the answer to this state; after a dropped state, for whatever the
+                // controller says (it speaks when the newest state it has goes stale).
+                let waiting = gate.latched().is_none();
                 let deadline = monotonic_ns() + secs_to_ns(s.lockstep_timeout);
-                let mut answered = drain(ports, bridge, &mut gate, &mut lat, seq);
-                while waiting && !answered {
+                let (mut answered, mut any) = drain(ports, bridge, &mut gate, &mut lat, seq);
+                while waiting && !(answered || (dropped && any)) {
                     let now_wall = monotonic_ns();
                     if now_wall >= deadline || termination_requested(&ports.node) {
                         break;
@@ -452,9 +454,11 @@ pub fn run_vehicle<B: VehicleBridge>(
                         &ports.command_ready,
                         Duration::from_nanos(deadline - now_wall),
                     );
-                    answered = drain(ports, bridge, &mut gate, &mut lat, seq);
+                    let (a, n) = drain(ports, bridge, &mut gate, &mut lat, seq);
+                    answered |= a;
+                    any |= n;
                 }
-                if waiting && !answered {
+                if waiting && !dropped && !answered {
                     summary.lockstep_misses += 1;
                 }
                 apply(bridge, gate.decide(bridge.now_ns()));
@@ -466,7 +470,7 @@ pub fn run_vehicle<B: VehicleBridge>(
                     let n = sub_steps.min(steps_per - done);
                     let tick_end = wall0 + seq * period_ns + (done + n) as u64 * step_ns;
                     loop {
-                        drain(ports, bridge, &mut gate, &mut lat, seq);
+                        let _ = drain(ports, bridge, &mut gate, &mut lat, seq);
                         let w = monotonic_ns();
                         if w >= tick_end {
                             break;
@@ -529,27 +533,33 @@ pub fn run_vehicle<B: VehicleBridge>(
     summary
 }
 
-/// Receive every pending command, offer it to the gate at vehicle time `now_ns`; returns
-/// whether one answered state `seq` (or a newer one).
+/// Receive every pending status (its events go to the bridge) and command (offered to the
+/// gate); returns whether a command answered state `seq` (or a newer one), and whether any
+/// command came.
 fn drain<B: VehicleBridge>(
     ports: &VehiclePorts,
     bridge: &mut B,
     gate: &mut CommandGate,
     lat: &mut Latencies,
     seq: u64,
-) -> bool {
+) -> (bool, bool) {
     let now_ns = bridge.now_ns();
     while let Ok(Some(sample)) = ports.status.receive() {
         bridge.controller_events(sample.payload().events);
     }
-    let mut answered = false;
+    let (mut answered, mut any) = (false, false);
     while let Ok(Some(sample)) = ports.command.receive() {
         let cmd = *sample.payload();
-        lat.answered(&cmd, monotonic_ns(), seq);
+        if cmd.state_seq == seq {
+            // The latency of the cycle that answered the newest state (a fallback after a
+            // stall answers an old one: its "latency" is the stall).
+            lat.answered(&cmd, monotonic_ns(), seq);
+        }
         answered |= cmd.state_seq >= seq;
+        any = true;
         gate.offer(&cmd, now_ns);
     }
-    answered
+    (answered, any)
 }
 
 fn apply<B: VehicleBridge>(bridge: &mut B, a: Actuation) {

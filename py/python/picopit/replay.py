@@ -59,7 +59,7 @@ _OP_FOOTER = 0x02
 TOPICS = ("/state", "/command", "/status", "/heartbeat/controller", "/heartbeat/vehicle",
           "/scene", "/bullet/pose", "/target/pose")
 MODES = {0: "track", 1: "fallback", 2: "safe stop"}
-PHASES = {0: "chasing", 1: "pit", 2: "stabilising", 3: "aborted", 4: "done"}
+PHASES = {0: "chasing", 1: "pit", 2: "stabilising", 3: "done", 4: "aborted"}
 FAULTS = {1 << 0: "stale state", 1 << 1: "deadline missed", 1 << 2: "solver failure",
           1 << 3: "peer dead", 1 << 4: "no state", 1 << 5: "bad state"}
 DEFAULT_BOX = (4.8, 1.85, 1.45)

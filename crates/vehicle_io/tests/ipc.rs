@@ -1,0 +1,307 @@
+//! End to end over iceoryx2: both binaries as processes, on the lock-step simulated clock.
+//!
+//! - a lock-step run over IPC equals the in-process episode (same noise, same judge);
+//! - killing the controller mid-run: the vehicle stops itself inside the road, and the
+//!   controller's recording reads to its last message;
+//! - a stall of the state stream: the controller falls back while the states are stale and
+//!   resumes after; dropped states are survived;
+//! - bad input names what is wrong.
+//!
+//! The binaries are the test profile's (debug): wall-clock deadlines are lifted.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("picopit-ipc-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn prefix(name: &str) -> String {
+    format!("picopit-test-ipc-{}-{name}", std::process::id())
+}
+
+const TRIALS: &str = "data/trials/half_scale.jsonl";
+const HALF: &str = "configs/controller_half_scale.toml";
+
+fn vehicle(id: &str, prefix: &str, extra: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_pit-vehicle"));
+    c.current_dir(root())
+        .args(["--scenario", TRIALS, "--id", id, "--clock", "simulated"])
+        .args(["--prefix", prefix, "--connect-timeout", "120"])
+        .args(extra)
+        .stdout(Stdio::null());
+    c
+}
+
+fn controller(id: &str, prefix: &str, extra: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_pit-controller"));
+    c.current_dir(root())
+        .args(["--scenario", TRIALS, "--id", id, "--clock", "vehicle"])
+        .args(["--prefix", prefix, "--controller-config", HALF])
+        .args(["--model", "4dof", "--deadline", "60"])
+        .args(extra)
+        .stdout(Stdio::null());
+    c
+}
+
+fn wait(child: &mut Child, limit: Duration, what: &str) -> std::process::ExitStatus {
+    let t0 = Instant::now();
+    loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            return st;
+        }
+        if t0.elapsed() > limit {
+            let _ = child.kill();
+            panic!("{what} did not finish within {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap()
+}
+
+/// Run both processes to the end; the vehicle's and the controller's summaries.
+fn run_pair(
+    name: &str,
+    id: &str,
+    vehicle_args: &[&str],
+    controller_args: &[&str],
+) -> (serde_json::Value, serde_json::Value) {
+    let dir = out_dir(name);
+    let p = prefix(name);
+    let vs = dir.join("vehicle.json");
+    let cs = dir.join("controller.json");
+    let mut v = vehicle(id, &p, vehicle_args)
+        .args(["--summary", vs.to_str().unwrap()])
+        .spawn()
+        .unwrap();
+    let mut c = controller(id, &p, controller_args)
+        .args(["--summary", cs.to_str().unwrap()])
+        .spawn()
+        .unwrap();
+    let limit = Duration::from_secs(600);
+    assert!(wait(&mut v, limit, "pit-vehicle").success());
+    assert!(wait(&mut c, limit, "pit-controller").success());
+    (json(&vs), json(&cs))
+}
+
+#[test]
+fn a_lock_step_run_over_ipc_equals_the_in_process_episode() {
+    // R4 with the paper platform's sensing noise and a 50 ms latency, seed 2; the
+    // in-process runner does not compensate delays, so neither does the controller here.
+    let (v, c) = run_pair(
+        "parity",
+        "R4",
+        &[
+            "--noise",
+            "paper",
+            "--latency",
+            "0.05",
+            "--seed",
+            "2",
+            "--lockstep-timeout",
+            "30",
+        ],
+        &["--no-delay-compensation"],
+    );
+    assert_eq!(v["ending"], "finished", "{v}");
+    assert_eq!(c["ending"], "finished", "{c}");
+    assert_eq!(v["lockstep_misses"], 0);
+    assert_eq!(c["fallbacks"], 0, "{c}");
+
+    let sc = vehicle_io::cli::load_scenario(&root().join(TRIALS), "R4").unwrap();
+    let mut cfg = sim::EpisodeConfig::preset("4dof").unwrap();
+    cfg.models_dir = root().join("models");
+    cfg.controller = planner::ControllerSettings::from_toml_str(
+        &std::fs::read_to_string(root().join(HALF)).unwrap(),
+    )
+    .unwrap();
+    cfg.clock = sim::ClockKind::Simulated;
+    cfg.uncertainty.position_std = 0.01;
+    cfg.uncertainty.yaw_rate_std = 0.002;
+    cfg.uncertainty.latency = 0.05;
+    let r = sim::run_episode(&sc, &cfg, 2).unwrap();
+    let m = serde_json::to_value(r.metrics).unwrap();
+    assert_eq!(v["metrics"], m, "IPC {} vs in process {}", v["metrics"], m);
+}
+
+#[test]
+fn killing_the_controller_makes_the_vehicle_stop_itself_and_the_recording_reads_to_its_end() {
+    let dir = out_dir("kill");
+    let p = prefix("kill");
+    let vs = dir.join("vehicle.json");
+    let cm = dir.join("controller.mcap");
+    let vm = dir.join("vehicle.mcap");
+    let mut v = vehicle("R1", &p, &["--lockstep-timeout", "0.3"])
+        .args([
+            "--summary",
+            vs.to_str().unwrap(),
+            "--record",
+            vm.to_str().unwrap(),
+        ])
+        .spawn()
+        .unwrap();
+    let mut c = controller("R1", &p, &[])
+        .args(["--record", cm.to_str().unwrap()])
+        .spawn()
+        .unwrap();
+    // Let the maneuver get going (the bullet is driving at speed), then SIGKILL.
+    let t0 = Instant::now();
+    while count_messages(&vm, "/command").0 < 25 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(300),
+            "the run never got going"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    c.kill().unwrap();
+    let _ = c.wait();
+    assert!(wait(&mut v, Duration::from_secs(300), "pit-vehicle").success());
+
+    let s = json(&vs);
+    let stop = &s["safe_stop"];
+    assert_eq!(stop["reason"], "command_timeout", "{s}");
+    assert!(stop["speed_at_latch"].as_f64().unwrap() > 1.0, "{s}");
+    assert!(
+        stop["stopped_at"].is_number(),
+        "the bullet came to rest: {s}"
+    );
+    assert!(s["final_bullet_speed"].as_f64().unwrap() < 0.1, "{s}");
+    assert_ne!(
+        s["metrics"]["failed_vehicle"], "bullet",
+        "the bullet stayed clear: {s}"
+    );
+    assert_ne!(s["metrics"]["failed_vehicle"], "both", "{s}");
+
+    // The killed controller's file: every record up to the end decodes.
+    let (commands, clean) = count_messages(&cm, "/command");
+    assert!(commands >= 20, "{commands} commands recorded");
+    assert!(!clean, "a killed process leaves no footer");
+    // The vehicle ended cleanly: its file is complete.
+    let (_, clean) = count_messages(&vm, "/state");
+    assert!(clean, "the vehicle's recording is finished");
+}
+
+/// Messages on `topic` in an MCAP file read as a stream, and whether the stream ended
+/// cleanly (a footer) rather than at a truncation. Every message must decode as JSON.
+fn count_messages(path: &Path, topic: &str) -> (usize, bool) {
+    let Ok(bytes) = std::fs::read(path) else {
+        return (0, false);
+    };
+    let mut n = 0;
+    let mut clean = true;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        match m {
+            Ok(m) => {
+                let _: serde_json::Value = serde_json::from_slice(&m.data).unwrap_or_else(|e| {
+                    panic!(
+                        "{}: message on {} is not JSON: {e}",
+                        path.display(),
+                        m.channel.topic
+                    )
+                });
+                if m.channel.topic == topic {
+                    n += 1;
+                }
+            }
+            Err(_) => {
+                clean = false;
+                break;
+            }
+        }
+    }
+    (n, clean)
+}
+
+#[test]
+fn a_stall_of_the_states_makes_the_controller_fall_back_and_dropped_states_are_survived() {
+    let (v, c) = run_pair(
+        "stall",
+        "R4",
+        &[
+            "--stall-at",
+            "1.0",
+            "--stall-for",
+            "0.5",
+            "--drop-states",
+            "0.1",
+            "--seed",
+            "4",
+            "--lockstep-timeout",
+            "0.3",
+        ],
+        &[],
+    );
+    assert_eq!(v["ending"], "finished", "{v}");
+    assert!(v["states_dropped"].as_u64().unwrap() >= 10, "{v}");
+    assert!(
+        v["safe_stop"].is_null(),
+        "fallbacks are commands: no safe stop {v}"
+    );
+    assert!(c["stale_states"].as_u64().unwrap() >= 5, "{c}");
+    assert!(c["fallbacks"].as_u64().unwrap() >= 5, "{c}");
+    // It resumed: far more states were answered than fell back.
+    assert!(
+        c["solves"].as_u64().unwrap() > 3 * c["fallbacks"].as_u64().unwrap(),
+        "{c}"
+    );
+}
+
+#[test]
+fn bad_input_is_refused_with_its_name() {
+    let out = Command::new(env!("CARGO_BIN_EXE_pit-vehicle"))
+        .current_dir(root())
+        .args(["--scenario", TRIALS, "--id", "R9"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("R9") && err.contains("4 scenarios"), "{err}");
+
+    let dir = out_dir("bad");
+    let cfg = dir.join("controller.toml");
+    std::fs::write(&cfg, "stale_periods = 0.5\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_pit-controller"))
+        .current_dir(root())
+        .args([
+            "--scenario",
+            TRIALS,
+            "--id",
+            "R1",
+            "--config",
+            cfg.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("stale_periods"), "{err}");
+
+    std::fs::write(&cfg, "perod = 0.05\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_pit-controller"))
+        .current_dir(root())
+        .args([
+            "--scenario",
+            TRIALS,
+            "--id",
+            "R1",
+            "--config",
+            cfg.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("perod"), "{err}");
+}
