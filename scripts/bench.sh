@@ -29,4 +29,5 @@ run_bench picopit-dynamics models plant
 run_bench picopit-pico-nn pico
 run_bench picopit-mpc ctrl_step
 run_bench picopit-planner plan_step
+run_bench picopit-vehicle-io ipc
 python3 scripts/bench_gate.py

@@ -122,6 +122,9 @@ fn service_err(service: &str, e: impl Debug) -> PortError {
 /// # Errors
 /// [`PortError::Node`] when iceoryx2 cannot create it.
 pub fn node(name: &str) -> Result<Node<Svc>, PortError> {
+    // iceoryx2 logs at "warn" by default (e.g. that no config file was found and its
+    // defaults apply); `IOX2_LOG_LEVEL` still overrides.
+    set_log_level_from_env_or(LogLevel::Error);
     let name: NodeName = name
         .try_into()
         .map_err(|e| PortError::Node(format!("node name {name:?}: {e:?}")))?;

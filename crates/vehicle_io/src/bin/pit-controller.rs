@@ -37,7 +37,11 @@ enum Model {
 /// Settings come from defaults, then `--config`, then the options given here. The road,
 /// the obstacles, μ and the vehicle parameters are the scenario's (the controller's map).
 #[derive(Parser, Debug)]
-#[command(name = "pit-controller", version, about, long_about = None)]
+#[command(
+    name = "pit-controller",
+    version,
+    about = "The hierarchical PIT controller as a process: states in, bullet commands out, over iceoryx2"
+)]
 struct Args {
     /// Scenario file (JSON lines, the scenario dataset's schema).
     #[arg(long, default_value = "data/scenarios.jsonl")]
@@ -81,7 +85,7 @@ struct Args {
     /// Write a JSON summary (cycles, fallbacks, deadline misses, step times, memory) here.
     #[arg(long)]
     summary: Option<PathBuf>,
-    /// Stop after this many control cycles (the time-sample buffers are this long).
+    /// Keep the step times of at most this many cycles for the summary (preallocated).
     #[arg(long, default_value_t = 200_000)]
     max_cycles: usize,
     /// Print the effective settings as TOML and exit.

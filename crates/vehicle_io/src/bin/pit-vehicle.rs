@@ -31,7 +31,11 @@ enum Noise {
 ///
 /// Settings come from defaults, then `--config`, then the options given here.
 #[derive(Parser, Debug)]
-#[command(name = "pit-vehicle", version, about, long_about = None)]
+#[command(
+    name = "pit-vehicle",
+    version,
+    about = "The vehicle side: the plant for both vehicles, states out, commands in, over iceoryx2"
+)]
 struct Args {
     /// Scenario file (JSON lines, the scenario dataset's schema).
     #[arg(long, default_value = "data/scenarios.jsonl")]
