@@ -260,6 +260,57 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _trials_parser(sub) -> None:
+    p = sub.add_parser(
+        "trials",
+        help="the half-scale trials R1-R4 over IPC (pit-vehicle + pit-controller): tables, figure, MCAP",
+        description=(
+            "Run the trial cases with the release binaries pit-vehicle and pit-controller over "
+            "iceoryx2 (lock step on a simulated clock; --realtime: wall clock): per case one nominal "
+            "run (no noise, seed 0, MCAP recorded) for a table like the paper's real-vehicle table, "
+            "then K repeats under sensing noise (seeds 1..K) for the success rate with a Wilson 95 %% "
+            "interval. Writes trials.md/.csv/.json, trials.png and per-run summaries, logs and MCAP."
+        ),
+    )
+    p.add_argument("--half-scale", action="store_true",
+                   help="the half-scale trials: data/trials/half_scale.jsonl with configs/controller_half_scale.toml")
+    p.add_argument("--scenarios", metavar="JSONL", help="trial scenarios (overrides --half-scale's)")
+    p.add_argument("--controller-config", metavar="TOML", help="controller settings (overrides --half-scale's)")
+    p.add_argument("--cases", metavar="LIST", help="comma-separated case ids (default: all in the file)")
+    p.add_argument("--repeats", type=int, default=5, metavar="K", help="noisy repeats per case, seeds 1..K (default 5)")
+    p.add_argument("--noise", choices=("none", "paper"), default="paper", help="sensing noise of the repeats (default paper)")
+    p.add_argument("--latency", type=float, default=0.05, metavar="S", help="sensing latency of the repeats (s, default 0.05)")
+    p.add_argument("--realtime", action="store_true", help="pace both processes by the wall clock (default: lock step)")
+    p.add_argument("--jobs", type=int, default=1, metavar="N", help="runs at a time (default 1)")
+    p.add_argument("--timeout", type=float, metavar="S", help="wall-time limit of one run (s; default from T_max)")
+    p.add_argument("--model", choices=("4dof", "pinn", "picopinn"), help="controller's target surrogate (default: its settings')")
+    p.add_argument("--out", metavar="DIR", help="run folder (default runs/trials-<UTC stamp>)")
+    p.add_argument("--json", metavar="PATH", help="also write trials.json here")
+    p.add_argument("--bin-dir", metavar="DIR", help="folder of pit-vehicle and pit-controller "
+                   "(default $PICOPIT_BIN_DIR, else <repo>/target/release)")
+    p.add_argument("--no-figures", action="store_true", help="skip trials.png")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_trials)
+
+
+def _cmd_trials(args: argparse.Namespace) -> int:
+    from . import trials
+
+    try:
+        summary, rows, paths = trials.run(args, _command_line(_ARGV))
+    except trials.TrialsError as e:
+        return _bad_input(str(e))
+    print(trials.nominal_table(summary), end="")
+    if summary["overall"].get("repeats"):
+        print()
+        print(trials.repeats_table(summary), end="")
+    errors = [r for r in rows if r["cause"] == trials.ERROR_CAUSE]
+    for r in errors:
+        print(f"trials: note: {r['case']} {r['kind']} seed {r['seed']}: {r['error']} (logs in {paths['md'].parent / r['dir']})")
+    print("trials: wrote " + ", ".join(str(p) for p in paths.values()))
+    return 1 if rows and len(errors) == len(rows) else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -279,6 +330,7 @@ def build_parser() -> argparse.ArgumentParser:
     _scenarios_parser(sub)
     _bench_parser(sub)
     _replay_parser(sub)
+    _trials_parser(sub)
     return parser
 
 
