@@ -172,7 +172,9 @@ pub fn run_controller(
                 reference = Some((h.vehicle_ns, h.wall_sent_ns));
             }
         }
-        let Some((ref_vehicle, ref_wall)) = reference else {
+        // Nothing to answer before the first state (a command now would be stale or a
+        // safe-stop request by the time the vehicle's clock starts).
+        let (Some((ref_vehicle, ref_wall)), true) = (reference, latest.is_some()) else {
             continue;
         };
         let now_ns = match s.clock {
@@ -487,6 +489,15 @@ pub fn run_vehicle<B: VehicleBridge>(
         let over = bridge.end_period();
         seq += 1;
         summary.periods += 1;
+        if s.soak_periods >= 10 && summary.periods % (s.soak_periods / 10) == 0 {
+            eprintln!(
+                "pit-vehicle: soak {} / {} periods ({} runs), {} lock-step misses",
+                summary.periods,
+                s.soak_periods,
+                summary.restarts + 1,
+                summary.lockstep_misses
+            );
+        }
         let t = bridge.now_ns() as f64 * 1e-9;
         if let Some((_, at)) = gate.latched() {
             if summary.safe_stop.is_none() {

@@ -305,3 +305,25 @@ fn bad_input_is_refused_with_its_name() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("perod"), "{err}");
 }
+
+#[test]
+fn a_controller_started_first_waits_for_the_first_state() {
+    // The vehicle's heartbeats arrive before its first state: the controller must not
+    // answer them (an early safe-stop request used to latch the vehicle's safe stop at t = 0).
+    let dir = out_dir("order");
+    let p = prefix("order");
+    let vs = dir.join("vehicle.json");
+    let mut c = controller("R4", &p, &[]).spawn().unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let mut v = vehicle("R4", &p, &["--latency", "0.05", "--lockstep-timeout", "30"])
+        .args(["--summary", vs.to_str().unwrap()])
+        .spawn()
+        .unwrap();
+    let limit = Duration::from_secs(600);
+    assert!(wait(&mut v, limit, "pit-vehicle").success());
+    assert!(wait(&mut c, limit, "pit-controller").success());
+    let s = json(&vs);
+    assert!(s["safe_stop"].is_null(), "{s}");
+    assert_eq!(s["commands_stale"], 0, "{s}");
+    assert!(s["commands_applied"].as_u64().unwrap() >= 20, "{s}");
+}

@@ -140,6 +140,23 @@ fn settings(args: &Args) -> Result<ControllerIoSettings, String> {
     Ok(s)
 }
 
+/// A relative models folder that does not exist here is looked up beside the binary's
+/// checkout (`<repo>/target/release/pit-controller` → `<repo>/models`).
+fn resolve_models_dir(dir: &std::path::Path) -> PathBuf {
+    if dir.is_absolute() || dir.exists() {
+        return dir.to_path_buf();
+    }
+    std::env::current_exe()
+        .ok()
+        .and_then(|exe| {
+            exe.ancestors()
+                .skip(1)
+                .map(|a| a.join(dir))
+                .find(|p| p.is_dir())
+        })
+        .unwrap_or_else(|| dir.to_path_buf())
+}
+
 fn main() {
     let args = Args::parse();
     let s = settings(&args).unwrap_or_else(|e| fail(&e));
@@ -150,6 +167,8 @@ fn main() {
         );
         return;
     }
+    let mut s = s;
+    s.models_dir = resolve_models_dir(&s.models_dir);
     let sc = load_scenario(&args.scenario, &args.id).unwrap_or_else(|e| fail(&e));
     let params = sc.params.load().unwrap_or_else(|e| fail(&e.to_string()));
     let road = sc.build_road().unwrap_or_else(|e| fail(&e.to_string()));
