@@ -64,7 +64,9 @@ fn roundtrip(c: &mut Criterion) {
     for _ in 0..10 {
         round();
     }
-    c.bench_function("ipc/state_to_command", |b| b.iter(&mut round));
+    let mut group = c.benchmark_group("ipc");
+    group.bench_function("state_to_command", |b| b.iter(&mut round));
+    group.finish();
     stop.store(true, Ordering::Relaxed);
     echo.join().unwrap();
 }

@@ -137,11 +137,13 @@ pub fn run_controller(
         if beat(&ports.heartbeat, &mut hb, 0).is_err() {
             break Ending::Transport;
         }
-        let Ok(_fired) = wait_event(&ports.state_ready, period) else {
-            break Ending::Transport;
-        };
+        let waited = wait_event(&ports.state_ready, period);
+        // A signal interrupts the wait: SIGINT/SIGTERM end the loop cleanly.
         if termination_requested(&ports.node) {
             break Ending::Interrupted;
+        }
+        if waited.is_err() {
+            break Ending::Transport;
         }
         let wall = monotonic_ns();
         let mut new_state = false;

@@ -327,3 +327,46 @@ fn a_controller_started_first_waits_for_the_first_state() {
     assert_eq!(s["commands_stale"], 0, "{s}");
     assert!(s["commands_applied"].as_u64().unwrap() >= 20, "{s}");
 }
+
+#[test]
+fn sigterm_ends_the_controller_cleanly_with_a_complete_recording() {
+    let dir = out_dir("term");
+    let p = prefix("term");
+    let cs = dir.join("controller.json");
+    let cm = dir.join("controller.mcap");
+    let vs = dir.join("vehicle.json");
+    let mut v = vehicle("R1", &p, &["--lockstep-timeout", "0.3"])
+        .args(["--summary", vs.to_str().unwrap()])
+        .spawn()
+        .unwrap();
+    let mut c = controller("R1", &p, &[])
+        .args([
+            "--record",
+            cm.to_str().unwrap(),
+            "--summary",
+            cs.to_str().unwrap(),
+        ])
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    while count_messages(&cm, "/command").0 < 10 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(300),
+            "the run never got going"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // SAFETY: kill(2) on our own child's pid with SIGTERM.
+    let rc = unsafe { libc::kill(c.id() as i32, libc::SIGTERM) };
+    assert_eq!(rc, 0);
+    let st = wait(&mut c, Duration::from_secs(60), "pit-controller");
+    assert!(st.success(), "{st:?}");
+    assert_eq!(json(&cs)["ending"], "interrupted");
+    let (commands, clean) = count_messages(&cm, "/command");
+    assert!(
+        clean && commands >= 10,
+        "{commands} commands, footer {clean}"
+    );
+    assert!(wait(&mut v, Duration::from_secs(300), "pit-vehicle").success());
+    assert_eq!(json(&vs)["safe_stop"]["reason"], "command_timeout");
+}
