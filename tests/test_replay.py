@@ -45,7 +45,7 @@ def _status(k: int) -> dict:
         faults |= 1 << 3
     return {"seq": k, "state_seq": k, "stamp_ns": k * DT_NS + 5_000_000, "compensated_ns": 5_000_000,
             "ctrl_ns": 1, "plan_ns": 0, "deadline_misses": 0, "fallbacks": 0, "stale_states": 0,
-            "phase": min(4, k // 20), "mpc_status": 1, "faults": faults}
+            "phase": min(3, k // 25), "mpc_status": 1, "faults": faults}
 
 
 def _heartbeat(k: int, peer: int) -> dict:

@@ -393,23 +393,15 @@ impl PitController {
         })
     }
 
-    /// Controlled braking along the road: steer the bullet's heading onto the road's, brake
-    /// at `abort_brake` of the road's adhesion (a spun, sliding target decelerates at up to
-    /// μ g: a gentler stop runs the bullet into it).
+    /// Controlled braking along the road at `abort_brake` of the road's adhesion (a spun,
+    /// sliding target decelerates at up to μ g: a gentler stop runs the bullet into it).
     fn safe_stop(&self, input: &ControllerInput<'_>) -> BulletInput {
-        let xb = &input.bullet;
-        let b = &self.params.bullet;
-        let road_heading = input.road.project(Vec2::new(xb[0], xb[1])).heading;
-        let err = wrap(road_heading - xb[2]);
-        let delta = (0.8 * err - 0.1 * xb[5]).clamp(-0.5 * b.steer_max, 0.5 * b.steer_max);
-        // Braking force `abort_brake · μ m g` (all four wheels through the blended brakes:
-        // the rear-axle torque of the same force, negative).
-        let force = self.settings.phases.abort_brake * self.mu * b.mass * 9.81;
-        let brake = if xb[3] > 0.2 {
-            -force * b.wheel_radius / (b.drive_efficiency * b.gear_ratio)
-        } else {
-            0.0
-        };
-        BulletInput::new(delta, brake)
+        dynamics::bullet::brake_along_road(
+            input.road,
+            &input.bullet,
+            &self.params.bullet,
+            self.mu,
+            self.settings.phases.abort_brake,
+        )
     }
 }
