@@ -22,6 +22,14 @@ fn invalid(field: &str, problem: impl Into<String>) -> ConfigError {
     }
 }
 
+/// Deserialize TOML (`file` names it in the error).
+fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, file: &str) -> Result<T, ConfigError> {
+    toml::from_str(text).map_err(|e| ConfigError::Parse {
+        file: file.to_owned(),
+        message: e.to_string(),
+    })
+}
+
 fn in_range(field: &str, v: f64, lo: f64, hi: f64) -> Result<(), ConfigError> {
     if v.is_finite() && v >= lo && v <= hi {
         Ok(())
@@ -104,10 +112,7 @@ impl ControllerIoSettings {
     /// # Errors
     /// [`ConfigError`] naming the file or the field.
     pub fn from_toml_str(text: &str, file: &str) -> Result<Self, ConfigError> {
-        let s: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            file: file.to_owned(),
-            message: e.to_string(),
-        })?;
+        let s: Self = parse_toml(text, file)?;
         s.validate()?;
         Ok(s)
     }
@@ -222,10 +227,7 @@ impl VehicleIoSettings {
     /// # Errors
     /// [`ConfigError`] naming the file or the field.
     pub fn from_toml_str(text: &str, file: &str) -> Result<Self, ConfigError> {
-        let s: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            file: file.to_owned(),
-            message: e.to_string(),
-        })?;
+        let s: Self = parse_toml(text, file)?;
         s.validate()?;
         Ok(s)
     }

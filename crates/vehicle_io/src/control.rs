@@ -51,7 +51,7 @@ pub struct CycleInput<'a> {
 }
 
 /// Counters since construction.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Counters {
     pub cycles: u64,
     pub solves: u64,

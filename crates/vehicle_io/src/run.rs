@@ -75,12 +75,8 @@ pub enum Ending {
 #[derive(Debug, Clone, Serialize)]
 pub struct ControllerSummary {
     pub ending: Ending,
-    pub cycles: u64,
-    pub solves: u64,
-    pub deadline_misses: u32,
-    pub fallbacks: u32,
-    pub stale_states: u32,
-    pub solver_failures: u32,
+    #[serde(flatten)]
+    pub counters: Counters,
     pub states_received: u64,
     /// Control-step time, planning included (ms), over the solving cycles.
     pub cycle_ms: Stats,
@@ -132,7 +128,6 @@ pub fn run_controller(
     let mut reference: Option<(u64, u64)> = None;
     let mut last_hb_wall: Option<u64> = None;
     let mut states_received = 0u64;
-    let mut last_answered: Option<u64> = None;
     let ending = loop {
         if beat(&ports.heartbeat, &mut hb, 0).is_err() {
             break Ending::Transport;
@@ -190,20 +185,12 @@ pub fn run_controller(
         if !(new_state || stale || !peer_alive) {
             continue;
         }
-        if !new_state
-            && latest.is_some_and(|l| last_answered == Some(l.seq))
-            && !stale
-            && peer_alive
-        {
-            continue;
-        }
         let (mut cmd, status) = lp.step(&CycleInput {
             state: latest.as_ref(),
             now_ns,
             wall_received_ns: latest_wall,
             peer_alive,
         });
-        last_answered = latest.map(|l| l.seq);
         cmd.wall_sent_ns = monotonic_ns();
         let sent = publish(&ports.command, cmd)
             .and_then(|()| publish(&ports.status, status))
@@ -227,16 +214,10 @@ pub fn run_controller(
             break Ending::Finished;
         }
     };
-    let c: Counters = lp.counters();
     let (peak, rss) = resident_kib();
     ControllerSummary {
         ending,
-        cycles: c.cycles,
-        solves: c.solves,
-        deadline_misses: c.deadline_misses,
-        fallbacks: c.fallbacks,
-        stale_states: c.stale_states,
-        solver_failures: c.solver_failures,
+        counters: lp.counters(),
         states_received,
         cycle_ms: Stats::of(&mut cycle_ms),
         plan_ms: Stats::of(&mut plan_ms),
@@ -501,10 +482,9 @@ pub fn run_vehicle<B: VehicleBridge>(
             );
         }
         let t = bridge.now_ns() as f64 * 1e-9;
-        if let Some((_, at)) = gate.latched() {
+        if gate.latched().is_some() {
             if summary.safe_stop.is_none() {
                 latch_speed = bridge.bullet_speed();
-                let _ = at;
             }
             if stopped_at.is_none() && bridge.bullet_speed() < 0.1 {
                 stopped_at = Some(t);

@@ -152,11 +152,7 @@ impl VehicleBridge for SimBridge {
     }
 
     fn end_period(&mut self) -> bool {
-        if !self.finished {
-            self.finished = matches!(self.sim.end_period(), Status::Done(_));
-        } else {
-            self.sim.end_period();
-        }
+        self.finished |= matches!(self.sim.end_period(), Status::Done(_));
         self.finished
     }
 

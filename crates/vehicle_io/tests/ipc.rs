@@ -260,50 +260,31 @@ fn a_stall_of_the_states_makes_the_controller_fall_back_and_dropped_states_are_s
 
 #[test]
 fn bad_input_is_refused_with_its_name() {
-    let out = Command::new(env!("CARGO_BIN_EXE_pit-vehicle"))
-        .current_dir(root())
-        .args(["--scenario", TRIALS, "--id", "R9"])
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = refused(env!("CARGO_BIN_EXE_pit-vehicle"), &["--id", "R9"]);
     assert!(err.contains("R9") && err.contains("4 scenarios"), "{err}");
 
     let dir = out_dir("bad");
     let cfg = dir.join("controller.toml");
+    let config = ["--id", "R1", "--config", cfg.to_str().unwrap()];
     std::fs::write(&cfg, "stale_periods = 0.5\n").unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_pit-controller"))
-        .current_dir(root())
-        .args([
-            "--scenario",
-            TRIALS,
-            "--id",
-            "R1",
-            "--config",
-            cfg.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = refused(env!("CARGO_BIN_EXE_pit-controller"), &config);
     assert!(err.contains("stale_periods"), "{err}");
 
     std::fs::write(&cfg, "perod = 0.05\n").unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_pit-controller"))
+    let err = refused(env!("CARGO_BIN_EXE_pit-controller"), &config);
+    assert!(err.contains("perod"), "{err}");
+}
+
+/// Run `bin` on the trial scenarios with `args`: it must exit with status 2; its stderr.
+fn refused(bin: &str, args: &[&str]) -> String {
+    let out = Command::new(bin)
         .current_dir(root())
-        .args([
-            "--scenario",
-            TRIALS,
-            "--id",
-            "R1",
-            "--config",
-            cfg.to_str().unwrap(),
-        ])
+        .args(["--scenario", TRIALS])
+        .args(args)
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("perod"), "{err}");
+    assert_eq!(out.status.code(), Some(2), "{bin} {args:?}");
+    String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 #[test]

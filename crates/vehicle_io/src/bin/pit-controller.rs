@@ -204,11 +204,11 @@ fn main() {
     eprintln!(
         "pit-controller: {:?} after {} cycles ({} solves, {} fallbacks, {} deadline misses, {} stale); step median {:.2} ms, p99 {:.2} ms; peak RSS {} KiB",
         summary.ending,
-        summary.cycles,
-        summary.solves,
-        summary.fallbacks,
-        summary.deadline_misses,
-        summary.stale_states,
+        summary.counters.cycles,
+        summary.counters.solves,
+        summary.counters.fallbacks,
+        summary.counters.deadline_misses,
+        summary.counters.stale_states,
         summary.cycle_ms.median,
         summary.cycle_ms.p99,
         summary.peak_rss_kib
