@@ -187,6 +187,11 @@ fn main() {
         sc.t_max + 20.0
     };
     let max_time = args.max_time.unwrap_or(default_max_time);
+    if !(max_time.is_finite() && max_time > 0.0) {
+        fail(&format!(
+            "--max-time {max_time}: must be a positive number of seconds"
+        ));
+    }
     let io = vehicle_io::run::run_vehicle(&s, &mut bridge, &ports, max_time);
     if let Some(r) = recorder {
         if let Err(e) = vehicle_io::recording::stop(r) {
