@@ -53,6 +53,7 @@ def test_bench_writes_the_tables_json_episodes_and_figures(bench_run):
     for name, s in doc["configs"].items():
         assert s["episodes"] == 3
         assert 0.0 <= s["success_rate"] <= 100.0
+        assert 0.0 <= s["success_at_rest_rate"] <= s["success_rate"]
         assert s["ctrl_ms_median"] > 0.0
         for key in ("success_straight", "success_curved", "success_low", "success_mid", "success_high",
                     "heading_error_deg_median", "min_margin_m_median", "boundary_violation_rate",

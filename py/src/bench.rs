@@ -91,6 +91,7 @@ fn run_episode<'py>(
     d.set_item("param_count", r.param_count)?;
     d.set_item("upper_layer", r.upper_layer)?;
     d.set_item("success", m.success)?;
+    d.set_item("at_rest", m.at_rest)?;
     d.set_item("cause", m.cause.map(|c| c.name()))?;
     d.set_item("decided_at", m.decided_at)?;
     d.set_item("terminal_heading_error", m.terminal_heading_error)?;
@@ -98,6 +99,8 @@ fn run_episode<'py>(
     d.set_item("boundary_violation", m.boundary_violation)?;
     d.set_item("secondary_collision", m.secondary_collision)?;
     d.set_item("contacts", m.contacts)?;
+    d.set_item("impact_speed", m.impact_speed)?;
+    d.set_item("impact_angle", m.impact_angle)?;
     d.set_item("sim_time", r.sim_time)?;
     d.set_item("control_steps", r.control_steps)?;
     for (prefix, s) in [("plan", &r.plan), ("ctrl", &r.ctrl)] {

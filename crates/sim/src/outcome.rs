@@ -6,9 +6,16 @@
 //! control step are seen and the closing speed of a contact is taken at its first touch.
 //!
 //! * **Success**: `|wrap(ψ_T − ψ_rev)| ≤ ε_ψ` with `ψ_rev` the road heading at the target's
-//!   foot point plus π (either direction of spin counts), and the target settled: speed
-//!   ≤ `rest_speed` and `|r|` ≤ `rest_yaw_rate`, both held for `dwell` seconds (consecutive
-//!   observations), with no failure before.
+//!   foot point plus π (either direction of spin counts), with no failure before, and the
+//!   target either
+//!   - **at rest**: speed ≤ `rest_speed` and `|r|` ≤ `rest_yaw_rate`, both held for `dwell`
+//!     seconds (consecutive observations): decided at once ([`Metrics::at_rest`]); or
+//!   - **settled at `T_max`**: reversed (heading within ε_ψ) over the last `dwell` seconds
+//!     before `T_max`, however fast it still rolls. This is the paper's test (the heading
+//!     at the terminal time within ε_ψ and no violation throughout), with the dwell so that
+//!     a target spinning through the reversed heading does not count. The episode runs to
+//!     `T_max`, so a reversed target still rolling must stay inside the road and clear of
+//!     everything until then.
 //! * **Boundary violation**: a footprint (target or bullet) crosses a road edge
 //!   (`Road::edge_distance < 0`: a corner, or on a curve the bulge of a side, is beyond it).
 //! * **Secondary collision**: the target or the bullet touches an obstacle (the plant's
@@ -19,7 +26,8 @@
 //!   within a push is one episode). Stabilisation begins when the controller says so
 //!   ([`Monitor::enter_stabilisation`]) or, failing that, when the first contact episode
 //!   ends (`separation_time` without contact).
-//! * **No termination**: `T_max` reached with neither success nor failure.
+//! * **No termination**: `T_max` reached with neither success nor failure (the target not
+//!   reversed at `T_max`).
 //! * **Decision infeasible in chasing**: reported by the controller
 //!   ([`Monitor::decision_infeasible`]).
 //!
@@ -191,6 +199,10 @@ pub struct Metrics {
     pub contacts: u32,
     /// Observations made.
     pub observations: u64,
+    /// The success was the target coming to rest reversed (not only settled, still rolling,
+    /// at `T_max`).
+    #[serde(default)]
+    pub at_rest: bool,
     /// Which vehicle crossed the edge or hit the obstacle that decided a boundary violation
     /// or secondary collision (`None` otherwise).
     #[serde(default)]
@@ -301,6 +313,8 @@ pub struct Monitor {
     settings: JudgeSettings,
     s_hint: f64,
     settled_since: Option<f64>,
+    /// Start of the current run of observations with the heading within ε_ψ.
+    reversed_since: Option<f64>,
     stabilising_since: Option<f64>,
     contacts: ContactTracker,
     latched: bool,
@@ -339,6 +353,7 @@ impl Monitor {
             settings,
             s_hint: 0.0,
             settled_since: None,
+            reversed_since: None,
             stabilising_since: None,
             contacts: ContactTracker::default(),
             latched: false,
@@ -354,6 +369,7 @@ impl Monitor {
                 secondary_collision: false,
                 contacts: 0,
                 observations: 0,
+                at_rest: false,
                 failed_vehicle: None,
                 impact_speed: None,
                 impact_angle: None,
@@ -570,19 +586,30 @@ impl Monitor {
 
         let x = &obs.target;
         let speed = x[0].hypot(x[1]);
-        let settled = err <= self.eps_psi
+        // A small tolerance so that a dwell of k control steps is met on the k-th.
+        let dwell = self.settings.dwell - 1e-9;
+        let reversed = err <= self.eps_psi;
+        let at_rest = reversed
             && speed <= self.settings.rest_speed
             && x[3].abs() <= self.settings.rest_yaw_rate;
-        if settled {
+        if at_rest {
             let since = *self.settled_since.get_or_insert(t);
-            // A small tolerance so that a dwell of k control steps is met on the k-th.
-            if t - since >= self.settings.dwell - 1e-9 {
+            if t - since >= dwell {
+                self.metrics.at_rest = true;
                 return self.decide(Outcome::Success { time: t });
             }
         } else {
             self.settled_since = None;
         }
+        if reversed {
+            self.reversed_since.get_or_insert(t);
+        } else {
+            self.reversed_since = None;
+        }
         if t >= self.t_max - 1e-9 {
+            if self.reversed_since.is_some_and(|since| t - since >= dwell) {
+                return self.decide(Outcome::Success { time: t });
+            }
             return self.decide(Outcome::Failure {
                 cause: FailureCause::NoTermination,
                 time: t,

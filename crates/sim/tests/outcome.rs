@@ -58,7 +58,7 @@ fn a_target_reversed_and_at_rest_succeeds_after_the_dwell() {
         other => panic!("{other:?}"),
     }
     let me = m.metrics();
-    assert!(me.success && me.cause.is_none());
+    assert!(me.success && me.at_rest && me.cause.is_none());
     assert!((me.terminal_heading_error - 0.2).abs() < 1e-9);
     assert!(me.min_margin > 0.0 && !me.boundary_violation && !me.secondary_collision);
 }
@@ -84,16 +84,54 @@ fn either_direction_of_spin_counts_but_a_wrong_heading_does_not() {
 }
 
 #[test]
-fn reversed_but_still_sliding_is_not_success() {
+fn reversed_but_still_rolling_succeeds_only_at_t_max_and_not_at_rest() {
+    // Rolling backwards at 1 m/s, reversed throughout: not at rest, so nothing is decided
+    // before T_max; at T_max it has been reversed for longer than the dwell: settled.
     let mut m = monitor(vec![]);
     let o = run_until_done(&mut m, |t| obs(t, 50.0 - 1.0 * t, 0.0, PI, 1.0, 0.0));
-    assert!(matches!(
-        o,
-        Outcome::Failure {
-            cause: FailureCause::NoTermination,
-            ..
-        }
-    ));
+    match o {
+        Outcome::Success { time } => assert!((time - 10.0).abs() < 1e-9, "{time}"),
+        other => panic!("{other:?}"),
+    }
+    assert!(m.metrics().success && !m.metrics().at_rest);
+
+    // Reversed only for the last 0.3 s (< dwell 0.5 s): a target spinning into the band
+    // as time runs out has not settled.
+    let mut m = monitor(vec![]);
+    let o = run_until_done(&mut m, |t| {
+        let yaw = if t < 9.7 - 1e-9 { PI / 2.0 } else { PI };
+        obs(t, 50.0 - 1.0 * t, 0.0, yaw, 1.0, 0.0)
+    });
+    assert!(
+        matches!(o, Outcome::Failure { cause: FailureCause::NoTermination, .. }),
+        "{o:?}"
+    );
+
+    // Spinning through the reversed heading at 1 rad/s: in the band (±0.35 rad) for 0.7 s
+    // around t = 9.5 s but out of it at T_max.
+    let mut m = monitor(vec![]);
+    let o = run_until_done(&mut m, |t| obs(t, 50.0, 0.0, PI + (t - 9.5), 3.0, 1.0));
+    assert!(
+        matches!(o, Outcome::Failure { cause: FailureCause::NoTermination, .. }),
+        "{o:?}"
+    );
+
+    // Reversed and rolling, but it rolls over the road edge before T_max.
+    let mut m = monitor(vec![]);
+    let o = run_until_done(&mut m, |t| obs(t, 50.0, 1.0 * t, PI, 1.0, 0.0));
+    assert!(
+        matches!(o, Outcome::Failure { cause: FailureCause::BoundaryViolation, .. }),
+        "{o:?}"
+    );
+
+    // Coming to rest reversed is decided at once and flagged at rest.
+    let mut m = monitor(vec![]);
+    let o = run_until_done(&mut m, |t| obs(t, 50.0, 0.0, PI, (2.0 - t).max(0.0), 0.0));
+    match o {
+        Outcome::Success { time } => assert!(time < 3.0, "{time}"),
+        other => panic!("{other:?}"),
+    }
+    assert!(m.metrics().at_rest);
 }
 
 #[test]

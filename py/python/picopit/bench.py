@@ -281,6 +281,8 @@ def summarise(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str,
         succ = sum(bool(r["success"]) for r in rs)
         s["successes"] = succ
         s["success_rate"] = _pct(succ, n)
+        # Successes by coming to rest reversed (the rest only settled, still rolling, at T_max).
+        s["success_at_rest_rate"] = _pct(sum(bool(r["success"]) and bool(r.get("at_rest")) for r in rs), n)
         for key, groups in (("road", ("straight", "curved")), ("adhesion", BANDS)):
             for g in groups:
                 sub = [r for r in rs if meta[r["index"]][key] == g]
@@ -324,6 +326,7 @@ def _fmt(v: Any, digits: int = 1) -> str:
 MAIN_COLUMNS: Tuple[Tuple[str, str, int], ...] = (
     ("episodes", "episodes", 0),
     ("success_rate", "success %", 1),
+    ("success_at_rest_rate", "at rest %", 1),
     ("success_straight", "straight %", 1),
     ("success_curved", "curved %", 1),
     ("success_low", "low μ %", 1),
@@ -372,7 +375,7 @@ def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
 
 
 EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion", "params", "mu",
-                  "seed", "model", "param_count", "upper_layer", "success", "cause", "decided_at",
+                  "seed", "model", "param_count", "upper_layer", "success", "at_rest", "cause", "decided_at",
                   "terminal_heading_error", "min_margin", "boundary_violation", "secondary_collision",
                   "contacts", "impact_speed", "impact_angle", "sim_time", "control_steps", "plan_count",
                   "plan_ms_median", "plan_ms_p99", "plan_ms_max", "ctrl_count", "ctrl_ms_median",
@@ -407,7 +410,7 @@ def write_episodes(table: Sequence[Mapping[str, Any]], out: Path) -> Tuple[Path,
     schema = pa.schema([
         (k, pa.string()) if k in ("config", "scenario", "category", "road", "adhesion", "params",
                                   "model", "cause", "final_phase", "abort", "error")
-        else (k, pa.bool_()) if k in ("upper_layer", "success", "boundary_violation", "secondary_collision")
+        else (k, pa.bool_()) if k in ("upper_layer", "success", "at_rest", "boundary_violation", "secondary_collision")
         else (k, pa.uint64()) if k == "seed"
         else (k, pa.int64()) if k in ("index", "param_count", "contacts", "control_steps", "plan_count",
                                       "ctrl_count", "mpc_failures", "mpc_time_budget")
