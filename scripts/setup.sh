@@ -35,8 +35,9 @@ python -m pip install --quiet 'maturin>=1.9.4,<2'
 
 echo "setup: building picopit._core (release) and installing picopit into $VENV"
 # --extras test pulls in pytest, train torch/safetensors/scipy (the surrogate pipeline),
-# peers casadi (benchmarks/peers); the build shares ./target with cargo.
-maturin develop --release --extras test,train,peers --manifest-path py/Cargo.toml
+# peers casadi (benchmarks/peers), ray (picopit bench --ray-address; tests/test_bench.py runs
+# the benchmark on a local Ray instance); the build shares ./target with cargo.
+maturin develop --release --extras test,train,peers,ray --manifest-path py/Cargo.toml
 python -c 'import picopit; print("setup: picopit ready:", ", ".join(picopit.__all__))'
 
 # The vehicle I/O processes (pit-controller, pit-vehicle): `picopit trials` runs them.
