@@ -10,34 +10,13 @@ use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetSt
 use nalgebra::{SMatrix, SVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
+use alloc_count::{allocations, CountingAlloc};
 use std::f64::consts::PI;
 
 /// Counts heap allocations made by the current thread (tests run on several threads).
-struct CountingAlloc;
-
-thread_local! {
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-// SAFETY: defers to the system allocator; only adds a thread-local counter.
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.with(|n| n.set(n.get() + 1));
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;
 
-fn allocations() -> usize {
-    ALLOCATIONS.with(Cell::get)
-}
 
 const DT: f64 = 0.05;
 const MU: f64 = 0.9;

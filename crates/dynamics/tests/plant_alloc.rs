@@ -4,25 +4,7 @@
 use dynamics::params::ParamSet;
 use dynamics::plant::{Plant, PlantConfig, VehicleInit};
 use dynamics::road::Obstacle;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
-struct CountingAlloc;
-
-thread_local! {
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-// SAFETY: defers to the system allocator; only adds a thread-local counter.
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+use alloc_count::{allocations, CountingAlloc};
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;
@@ -54,7 +36,7 @@ fn plant_step_allocates_nothing() {
             ..Default::default()
         },
     );
-    let before = ALLOCATIONS.with(Cell::get);
+    let before = allocations();
     let mut touched = (false, false);
     for k in 0..6000 {
         if k == 3000 {
@@ -78,7 +60,7 @@ fn plant_step_allocates_nothing() {
         touched.1 |= p.obstacle_contacts().iter().any(Option::is_some);
         let _ = p.take_contact_average();
     }
-    let after = ALLOCATIONS.with(Cell::get);
+    let after = allocations();
     assert!(touched.0, "the vehicles must touch");
     assert!(touched.1, "a vehicle must hit the parked car");
     assert_eq!(after - before, 0, "Plant::step allocated");

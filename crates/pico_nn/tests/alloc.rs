@@ -8,25 +8,7 @@ use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetSt
 use pico_nn::{JacobianMode, Kernel, SurrogateModel};
 use rand_chacha::rand_core::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
-struct CountingAlloc;
-
-thread_local! {
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-// SAFETY: defers to the system allocator; only adds a thread-local counter.
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+use alloc_count::{allocations, CountingAlloc};
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;
@@ -52,7 +34,7 @@ fn step_and_step_jac_allocate_nothing() {
         }
     }
     let mut jac = TargetJacobians::default();
-    let before = ALLOCATIONS.with(Cell::get);
+    let before = allocations();
     let mut sum = 0.0;
     for m in &mut models {
         for k in 0..200 {
@@ -70,7 +52,7 @@ fn step_and_step_jac_allocate_nothing() {
             sum += m.forward(&z)[0];
         }
     }
-    let after = ALLOCATIONS.with(Cell::get);
+    let after = allocations();
     assert!(sum.is_finite());
     assert_eq!(after - before, 0, "the surrogate allocated while stepping");
 }

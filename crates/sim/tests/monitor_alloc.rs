@@ -6,25 +6,7 @@ mod common;
 use dynamics::plant::{Plant, PlantConfig};
 use sim::outcome::Monitor;
 use sim::scenario::Scenario;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
-struct CountingAlloc;
-
-thread_local! {
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-// SAFETY: defers to the system allocator; only adds a thread-local counter.
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+use alloc_count::{allocations, CountingAlloc};
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;
@@ -47,7 +29,7 @@ fn monitor_steps_allocate_nothing() {
     plant.reset(&b, &t);
     let mut monitor = Monitor::for_scenario(&sc).unwrap();
     let mut driver = sc.target_driver(&params);
-    let before = ALLOCATIONS.with(Cell::get);
+    let before = allocations();
     for k in 0..100 {
         let x = plant.target_state();
         let (d, tb) = driver.command(k as f64 * 0.05, None, &x, &road);
@@ -60,7 +42,7 @@ fn monitor_steps_allocate_nothing() {
         }
         monitor.observe_plant(&plant);
     }
-    let after = ALLOCATIONS.with(Cell::get);
+    let after = allocations();
     assert_eq!(after - before, 0, "allocations in the monitored loop");
     assert!(monitor.metrics().observations > 0);
 }

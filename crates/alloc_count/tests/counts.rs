@@ -1,0 +1,24 @@
+//! The counter sees allocations, zeroed allocations and reallocations of its own thread.
+
+use alloc_count::{allocations, CountingAlloc};
+
+#[global_allocator]
+static GLOBAL: CountingAlloc = CountingAlloc;
+
+#[test]
+fn counts_allocations_and_growth_but_not_plain_arithmetic() {
+    let before = allocations();
+    let x: u64 = (1..100u64).sum();
+    assert_eq!(allocations(), before, "{x}");
+    let mut v: Vec<u8> = Vec::with_capacity(1);
+    assert_eq!(allocations(), before + 1);
+    v.extend_from_slice(&[0; 64]); // grows: a reallocation
+    assert_eq!(allocations(), before + 2);
+    let z = vec![0u64; 1000]; // alloc_zeroed
+    assert_eq!(allocations(), before + 3);
+    drop((v, z));
+    assert_eq!(allocations(), before + 3, "frees are not counted");
+    // Another thread's allocations are its own.
+    std::thread::spawn(|| drop(vec![1u8; 10])).join().unwrap();
+    assert!(allocations() >= before + 3);
+}
