@@ -333,6 +333,8 @@ struct Limits {
     wheelbase: f64,
     understeer: f64,
     lateral_accel: f64,
+    /// μ g (m/s²), for `CoupledMpc::set_pushing`.
+    grip: f64,
     /// Variable scales: torque (N m) and force (N).
     t_scale: f64,
     f_scale: f64,
@@ -392,6 +394,7 @@ impl CoupledMpc {
                 wheelbase: b.lf + b.lr,
                 understeer,
                 lateral_accel: settings.lateral_fraction * mu * 9.81,
+                grip: mu * 9.81,
                 t_scale,
                 f_scale,
             },
@@ -411,6 +414,18 @@ impl CoupledMpc {
         };
         me.warm_up();
         Ok(me)
+    }
+
+    /// Whether the bullet is pushing rather than chasing or falling back: selects the steer
+    /// bound's share of the grip, `lateral_fraction_push` or `lateral_fraction`. Cheap;
+    /// call it every control step.
+    pub fn set_pushing(&mut self, pushing: bool) {
+        let f = if pushing {
+            self.settings.lateral_fraction_push
+        } else {
+            self.settings.lateral_fraction
+        };
+        self.lim.lateral_accel = f * self.lim.grip;
     }
 
     /// Change the QP solver's settings between control steps (validated; allocates, so not
@@ -518,6 +533,7 @@ impl CoupledMpc {
                 wheelbase: 1.0,
                 understeer: 0.0,
                 lateral_accel: 1.0,
+                grip: 1.0,
                 t_scale: 1.0,
                 f_scale: 1.0,
             },
