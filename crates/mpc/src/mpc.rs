@@ -328,9 +328,28 @@ struct Limits {
     steer_rate: f64,
     torque_min: f64,
     torque_max: f64,
+    /// The speed-dependent steer bound `(wheelbase / v² + understeer) · lateral_accel`
+    /// (see [`Limits::steer_at`]).
+    wheelbase: f64,
+    understeer: f64,
+    lateral_accel: f64,
+    /// μ g (m/s²), for `CoupledMpc::set_pushing`.
+    grip: f64,
     /// Variable scales: torque (N m) and force (N).
     t_scale: f64,
     f_scale: f64,
+}
+
+impl Limits {
+    /// The largest steer (rad) the MPC may plan at forward speed `vx`: the steady-turn steer
+    /// `(L / v² + K_us) · a` at the lateral acceleration `a = lateral_fraction · μ g`, never
+    /// more than the actuator's `steer_max`. The bullet model has no combined slip, so it
+    /// would plan steer far past the grip while braking or driving (a swerve at 20 m/s with
+    /// 0.17 rad asks for three times μ g) and the real car breaks away and spins.
+    fn steer_at(&self, vx: f64) -> f64 {
+        let v = vx.abs().max(1.0);
+        ((self.wheelbase / (v * v) + self.understeer) * self.lateral_accel).min(self.steer_max)
+    }
 }
 
 impl CoupledMpc {
@@ -359,6 +378,7 @@ impl CoupledMpc {
         let n = settings.horizon;
         let b = &params.bullet;
         let bullet = BulletModel::new(b, mu, settings.dt);
+        let understeer = bullet.understeer_gradient().max(0.0);
         let t_scale = b.drive_torque_max.abs().max(b.drive_torque_min.abs());
         let f_scale = 0.25 * settings.contact.force_max;
         let mut me = Self {
@@ -371,6 +391,10 @@ impl CoupledMpc {
                 steer_rate: b.steer_rate_max,
                 torque_min: b.drive_torque_min,
                 torque_max: traction_limited_torque(b, mu, settings.traction_fraction),
+                wheelbase: b.lf + b.lr,
+                understeer,
+                lateral_accel: settings.lateral_fraction * mu * 9.81,
+                grip: mu * 9.81,
                 t_scale,
                 f_scale,
             },
@@ -390,6 +414,18 @@ impl CoupledMpc {
         };
         me.warm_up();
         Ok(me)
+    }
+
+    /// Whether the bullet is pushing rather than chasing or falling back: selects the steer
+    /// bound's share of the grip, `lateral_fraction_push` or `lateral_fraction`. Cheap;
+    /// call it every control step.
+    pub fn set_pushing(&mut self, pushing: bool) {
+        let f = if pushing {
+            self.settings.lateral_fraction_push
+        } else {
+            self.settings.lateral_fraction
+        };
+        self.lim.lateral_accel = f * self.lim.grip;
     }
 
     /// Change the QP solver's settings between control steps (validated; allocates, so not
@@ -494,6 +530,10 @@ impl CoupledMpc {
                 steer_rate: 1.0,
                 torque_min: -1.0,
                 torque_max: 1.0,
+                wheelbase: 1.0,
+                understeer: 0.0,
+                lateral_accel: 1.0,
+                grip: 1.0,
                 t_scale: 1.0,
                 f_scale: 1.0,
             },
@@ -733,10 +773,11 @@ impl CoupledMpc {
         }
         // Project onto the bounds and the steer-rate limit.
         let dmax = self.lim.steer_rate * self.settings.dt;
+        let steer_max = self.lim.steer_at(input.bullet[dynamics::bullet::idx::VX]);
         let mut prev = input.last_command[0];
         for u in &mut self.lin.u {
             u[0] = u[0]
-                .clamp(-self.lim.steer_max, self.lim.steer_max)
+                .clamp(-steer_max, steer_max)
                 .clamp(prev - dmax, prev + dmax);
             u[1] = u[1].clamp(self.lim.torque_min, self.lim.torque_max);
             prev = u[0];
@@ -1356,18 +1397,9 @@ impl AssemblyView<'_> {
             // Input bounds ∩ trust region, on ũ.
             let (ts_steer, ts_torque) = (s.trust_steer * trust, s.trust_torque * trust);
             let (cu, ct) = (c0 + l.o_u, c0 + l.o_u + 1);
-            row(
-                e,
-                b,
-                &[(cu, 1.0)],
-                (self.lim.steer_max - u[0]).min(ts_steer).max(0.0),
-            );
-            row(
-                e,
-                b,
-                &[(cu, -1.0)],
-                (self.lim.steer_max + u[0]).min(ts_steer).max(0.0),
-            );
+            let steer_max = self.lim.steer_at(self.lin.xb[k][dynamics::bullet::idx::VX]);
+            row(e, b, &[(cu, 1.0)], (steer_max - u[0]).min(ts_steer).max(0.0));
+            row(e, b, &[(cu, -1.0)], (steer_max + u[0]).min(ts_steer).max(0.0));
             row(
                 e,
                 b,

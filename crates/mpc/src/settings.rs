@@ -177,6 +177,15 @@ pub struct MpcSettings {
     /// Share of the rear axle's static traction (μ m g l_f / L) the planned drive torque
     /// may use (the rest is left for cornering); see `CoupledMpc`.
     pub traction_fraction: f64,
+    /// Share of the road's grip μ g the planned steer may ask for as steady lateral
+    /// acceleration: at the bullet's speed v the steer is bounded by
+    /// `(L / v² + K_us) · lateral_fraction · μ g` (the steady-turn steer, `K_us` the
+    /// understeer gradient); see `CoupledMpc`.
+    pub lateral_fraction: f64,
+    /// The same share while the bullet pushes (`CoupledMpc::set_pushing`): the contact
+    /// force turns the bullet too, so the steady-turn steer of the tyres alone is no bound
+    /// for the push (a large value lifts the bound to `steer_max`).
+    pub lateral_fraction_push: f64,
     pub weights: Weights,
     pub contact: ContactSettings,
     pub qp: QpSettings,
@@ -196,6 +205,8 @@ impl Default for MpcSettings {
             road_margin: 0.2,
             obstacle_clearance: 0.5,
             traction_fraction: 0.85,
+            lateral_fraction: 0.8,
+            lateral_fraction_push: 100.0,
             weights: Weights::default(),
             contact: ContactSettings::default(),
             qp: QpSettings::default(),
@@ -239,6 +250,8 @@ impl MpcSettings {
             ("dt", self.dt),
             ("time_budget", self.time_budget),
             ("traction_fraction", self.traction_fraction),
+            ("lateral_fraction", self.lateral_fraction),
+            ("lateral_fraction_push", self.lateral_fraction_push),
             ("trust_steer", self.trust_steer),
             ("trust_torque", self.trust_torque),
             ("step_tol", self.step_tol),

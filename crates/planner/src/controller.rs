@@ -364,6 +364,7 @@ impl PitController {
                     lane,
                 );
             }
+            self.mpc.set_pushing(phase == Phase::Pit);
             let out = self.mpc.solve(&MpcInput {
                 time: input.time,
                 target: input.target,
