@@ -71,7 +71,7 @@ def test_bench_writes_the_tables_json_episodes_and_figures(bench_run):
     assert doc["configs"]["pinn"]["param_count"] > doc["configs"]["picopinn"]["param_count"] > 0
     assert doc["run"]["scenes"] == 3 and len(doc["run"]["scene_ids"]) == 3
     md = (run / "summary.md").read_text()
-    assert "| config | episodes | success % | straight % | curved %" in md
+    assert "| config | episodes | success % | at rest % | straight % | curved %" in md
     assert "Failure causes" in md
     with open(run / "summary.csv") as fh:
         rows = list(csv.DictReader(fh))
