@@ -5,14 +5,19 @@
 //! A test binary installs it and reads the count of its own thread around the code under
 //! test:
 //!
-//! ```ignore
+//! ```
 //! use alloc_count::{allocations, CountingAlloc};
 //!
 //! #[global_allocator]
 //! static GLOBAL: CountingAlloc = CountingAlloc;
 //!
+//! fn hot_path(buf: &mut [f64]) {
+//!     buf.iter_mut().for_each(|x| *x *= 2.0);
+//! }
+//!
+//! let mut buf = vec![1.0; 16]; // set-up may allocate
 //! let before = allocations();
-//! hot_path();
+//! hot_path(&mut buf);
 //! assert_eq!(allocations() - before, 0);
 //! ```
 //!

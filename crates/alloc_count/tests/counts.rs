@@ -18,7 +18,25 @@ fn counts_allocations_and_growth_but_not_plain_arithmetic() {
     assert_eq!(allocations(), before + 3);
     drop((v, z));
     assert_eq!(allocations(), before + 3, "frees are not counted");
-    // Another thread's allocations are its own.
-    std::thread::spawn(|| drop(vec![1u8; 10])).join().unwrap();
-    assert!(allocations() >= before + 3);
+    // Another thread counts its own allocations, and they do not reach this thread's
+    // count: it allocates 100 times between two barriers while this thread waits.
+    let barrier = std::sync::Arc::new(std::sync::Barrier::new(2));
+    let other = {
+        let barrier = barrier.clone();
+        std::thread::spawn(move || {
+            barrier.wait();
+            let b = allocations();
+            for i in 0..100u8 {
+                drop(vec![i; 10]);
+            }
+            let n = allocations() - b;
+            barrier.wait();
+            n
+        })
+    };
+    barrier.wait();
+    let here = allocations();
+    barrier.wait();
+    assert_eq!(allocations(), here, "the other thread's allocations are not counted here");
+    assert_eq!(other.join().unwrap(), 100);
 }
