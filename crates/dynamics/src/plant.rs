@@ -595,6 +595,23 @@ impl Plant {
         b.point_velocity(p) + rotate(b.yaw, c.bumper_rate(b) - c.cg_rate(b))
     }
 
+    /// Apply an instantaneous planar impulse `impulse` (N s, world frame) at the world point
+    /// `at` to one vehicle: its c.g. velocity changes by `J / m` and its yaw rate by
+    /// `(at − c.g.) × J / I_z` (a rigid-body impulse; wheel spin, roll and pitch are left as
+    /// they are). For idealised studies (`sim::oracle`); the plant's own contact never
+    /// calls it. A non-finite impulse or point is ignored.
+    pub fn apply_impulse(&mut self, which: Which, impulse: Vec2, at: Vec2) {
+        if !(impulse.x.is_finite() && impulse.y.is_finite() && at.x.is_finite() && at.y.is_finite())
+        {
+            return;
+        }
+        let i = which as usize;
+        let c = &self.chassis[i];
+        let b = &mut self.bodies[i];
+        b.vel += impulse * c.inv_m;
+        b.r += cross(at - b.pos, impulse) * c.inv_iz;
+    }
+
     /// Advance by `duration` (rounded to whole steps).
     pub fn advance(&mut self, duration: f64) {
         if !(duration.is_finite() && duration > 0.0) {

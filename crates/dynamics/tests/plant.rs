@@ -68,6 +68,41 @@ fn momentum_is_conserved_through_contact_with_tyres_off() {
 }
 
 #[test]
+fn an_impulse_changes_momentum_by_j_and_angular_momentum_by_r_cross_j() {
+    use dynamics::geometry::{cross, Vec2};
+    let mut p = plant(PlantConfig::default());
+    pit_start(&mut p, 15.0, 2.0);
+    let (m0, l0, e0) = (
+        p.total_momentum(),
+        p.total_angular_momentum(),
+        p.planar_kinetic_energy(),
+    );
+    // A lateral shove at the target's rear quarter, to its right.
+    let at = p.body(Which::Target).pos + Vec2::new(-1.9, 0.9);
+    let j = Vec2::new(0.0, -2500.0);
+    p.apply_impulse(Which::Target, j, at);
+    let dm = p.total_momentum() - m0;
+    assert!((dm - j).norm() <= 1e-9 * j.norm(), "Δp = {dm:?}, J = {j:?}");
+    let dl = p.total_angular_momentum() - l0;
+    let expect = cross(at, j);
+    assert!(
+        (dl - expect).abs() <= 1e-9 * expect.abs().max(1.0),
+        "ΔL = {dl}, r × J = {expect}"
+    );
+    // Pushed right behind the c.g., the target yaws to the left (r > 0) and gains energy.
+    assert!(
+        p.body(Which::Target).r > 0.5,
+        "r = {}",
+        p.body(Which::Target).r
+    );
+    assert!(p.planar_kinetic_energy() > e0);
+    // A non-finite impulse is ignored.
+    let before = *p.body(Which::Target);
+    p.apply_impulse(Which::Target, Vec2::new(f64::NAN, 0.0), at);
+    assert_eq!(*p.body(Which::Target), before);
+}
+
+#[test]
 fn contact_dissipates_and_elastic_contact_nearly_conserves_energy() {
     for (damping, friction, expect_loss) in [(0.35, 0.4, true), (0.0, 0.0, false)] {
         let mut set = full();
