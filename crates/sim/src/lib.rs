@@ -7,10 +7,13 @@
 //! * [`episode`]: the closed-loop episode runner (plant + controller + success test) and
 //!   its benchmark configurations.
 //! * [`screen`]: rule and short-simulation screening used by the dataset generator.
+//! * [`oracle`]: the ideal-PIT bound (could any single rear-quarter shove, at any time
+//!   the bullet could be there, save the scenario?), a controller-independent ceiling.
 //! * [`vehicle`]: the simulated vehicle pair (plant, target driver, sensors, actuators,
 //!   judge) one control period at a time, shared by the episode runner and `pit-vehicle`.
 
 pub mod episode;
+pub mod oracle;
 pub mod outcome;
 pub mod scenario;
 pub mod screen;
@@ -19,6 +22,7 @@ pub mod vehicle;
 pub use episode::{
     run_episode, ClockKind, EpisodeConfig, EpisodeError, EpisodeResult, ModelKind, Uncertainty,
 };
+pub use oracle::{ideal_pit, OracleReport, OracleSettings};
 pub use outcome::{FailureCause, JudgeSettings, Metrics, Monitor, Observation, Outcome, Status};
 pub use scenario::{load_jsonl, parse_jsonl, Scenario, ScenarioError, TargetDriver};
 pub use screen::{screen, ScreenReport, ScreenSettings, Verdict};

@@ -289,7 +289,7 @@ pub fn screen(sc: &Scenario, settings: &ScreenSettings) -> Result<ScreenReport, 
 
 /// Earliest time the bullet can be at the PIT pose, against the target's stations sampled
 /// every `dt` (beyond the samples the target is assumed to hold its last speed).
-fn reach_time(
+pub(crate) fn reach_time(
     sc: &Scenario,
     params: &ParamSet,
     stations: &[f64],
