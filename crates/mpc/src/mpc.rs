@@ -16,11 +16,16 @@ use thiserror::Error;
 
 const NT: usize = 8;
 const NB: usize = 6;
-/// Target pose columns (X, Y, ψ) within x_T, bullet pose columns within x_B.
-const T_POSE: [usize; 3] = [6, 7, 2];
+/// The target's states in QP order: QP position `i` holds model state `TQ[i]`
+/// (`[vx, vy, ψ, r, X, Y]`, then the roll states `[p, φ]`, which the planar layout leaves
+/// out of the QP).
+const TQ: [usize; NT] = [0, 1, 2, 3, 6, 7, 4, 5];
+/// Target pose columns (X, Y, ψ) within the QP's δx_T, bullet pose columns within x_B.
+const T_POSE: [usize; 3] = [4, 5, 2];
 const B_POSE: [usize; 3] = [0, 1, 2];
-/// Tracked state entries: X_T, Y_T, ψ_T, vx_T (within x_T), X_B, Y_B, ψ_B, vx_B (within x_B).
-const TRACKED_T: [usize; 4] = [6, 7, 2, 0];
+/// Tracked state entries: X_T, Y_T, ψ_T, vx_T (QP positions within δx_T), X_B, Y_B, ψ_B,
+/// vx_B (within x_B).
+const TRACKED_T: [usize; 4] = [4, 5, 2, 0];
 const TRACKED_B: [usize; 4] = [0, 1, 2, 3];
 
 /// Where the variables and rows of one stage sit in a QP.
@@ -35,6 +40,8 @@ const TRACKED_B: [usize; 4] = [0, 1, 2, 3];
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Layout {
     coupled: bool,
+    /// Target states carried by the QP (the first `nt` of [`TQ`]; 0 in the bullet-only QP).
+    nt: usize,
     stage: usize,
     o_u: usize,
     o_f: usize,
@@ -47,6 +54,7 @@ struct Layout {
 
 const COUPLED: Layout = Layout {
     coupled: true,
+    nt: NT,
     stage: 19,
     o_u: 0,
     o_f: 2,
@@ -57,8 +65,24 @@ const COUPLED: Layout = Layout {
     rows: 19,
 };
 
+/// The coupled QP without the target's roll states (`QpSettings::target_roll = false`):
+/// 17 columns and 12 dynamics rows per stage.
+const COUPLED_PLANAR: Layout = Layout {
+    coupled: true,
+    nt: NT - 2,
+    stage: 17,
+    o_u: 0,
+    o_f: 2,
+    o_s: 4,
+    o_xt: 5,
+    o_xb: 11,
+    dyn_rows: NT - 2 + NB,
+    rows: 19,
+};
+
 const BULLET_ONLY: Layout = Layout {
     coupled: false,
+    nt: 0,
     stage: 9,
     o_u: 0,
     o_f: usize::MAX,
@@ -406,7 +430,7 @@ impl CoupledMpc {
             model_error: 0.0,
             stage_error: vec![(0.0, 0); n],
             soft: vec![SoftRows::default(); n],
-            qp_coupled: Self::build_qp(&settings, n, COUPLED)?,
+            qp_coupled: Self::build_qp(&settings, n, Self::coupled_layout(&settings))?,
             qp_bullet: Self::build_qp(&settings, n, BULLET_ONLY)?,
             coupled: true,
             clock: Box::new(MonotonicClock::new()),
@@ -494,9 +518,17 @@ impl CoupledMpc {
         }
     }
 
+    fn coupled_layout(settings: &MpcSettings) -> Layout {
+        if settings.qp.target_roll {
+            COUPLED
+        } else {
+            COUPLED_PLANAR
+        }
+    }
+
     fn layout(&self) -> Layout {
         if self.coupled {
-            COUPLED
+            Self::coupled_layout(&self.settings)
         } else {
             BULLET_ONLY
         }
@@ -852,8 +884,8 @@ impl CoupledMpc {
         for k in 0..self.n {
             let c0 = k * l.stage;
             let mut worst = (0.0, 0);
-            for i in 0..NT {
-                let dx = if l.coupled { x[c0 + l.o_xt + i] } else { 0.0 };
+            for (qi, &i) in TQ.iter().enumerate() {
+                let dx = if qi < l.nt { x[c0 + l.o_xt + qi] } else { 0.0 };
                 let pred = self.lin.xt[k + 1][i] + dx;
                 let e = (pred - self.cand.xt[k + 1][i]).abs();
                 if e > worst.0 {
@@ -1273,7 +1305,7 @@ impl AssemblyView<'_> {
                 };
                 e.put(vy_t, vy_t, wvy);
                 q[vy_t] += wvy * xt[1];
-                for j in 0..NT {
+                for j in 0..l.nt {
                     e.put(c0 + l.o_xt + j, c0 + l.o_xt + j, prox);
                 }
             }
@@ -1345,11 +1377,11 @@ impl AssemblyView<'_> {
             let f = self.lin.f[k];
             if l.coupled {
                 let jt = &self.lin.jt[k];
-                for i in 0..NT {
-                    e.put(r, c0 + l.o_xt + i, 1.0);
+                for (qi, &i) in TQ[..l.nt].iter().enumerate() {
+                    e.put(r, c0 + l.o_xt + qi, 1.0);
                     if k > 0 {
-                        for j in 0..NT {
-                            e.put(r, l.col(k - 1, l.o_xt + j), -jt.a[(i, j)]);
+                        for (qj, &j) in TQ[..l.nt].iter().enumerate() {
+                            e.put(r, l.col(k - 1, l.o_xt + qj), -jt.a[(i, j)]);
                         }
                     }
                     for c in 0..2 {

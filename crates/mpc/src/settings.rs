@@ -136,6 +136,12 @@ pub struct QpSettings {
     /// Clarabel's own wall-clock limit per QP (s): a safety net under the SCP loop's
     /// `time_budget`, which is read from the injected clock.
     pub time_limit: f64,
+    /// Carry the target's roll states (p, φ) in the coupled QP. `false` (the default)
+    /// leaves them out of the QP's linearisation (their deviation from the linearisation
+    /// trajectory is taken as zero), 17 instead of 19 columns per stage and a factor
+    /// about half the size; the nonlinear rollouts and the merit keep the full model.
+    /// Measured in `docs/mpc.md` ("The target's roll in the QP").
+    pub target_roll: bool,
 }
 
 impl Default for QpSettings {
@@ -147,6 +153,7 @@ impl Default for QpSettings {
             iterative_refinement: false,
             equilibrate: false,
             time_limit: 0.04,
+            target_roll: false,
         }
     }
 }

@@ -72,6 +72,17 @@ fn with_the_vehicles_apart_no_force_is_planned() {
 
 #[test]
 fn in_contact_the_planned_force_stays_in_the_corridor_and_the_bullet_in_its_envelope() {
+    in_contact_force_and_envelope(true);
+}
+
+/// The same with the coupled QP that leaves the target's roll states out
+/// (`qp.target_roll = false`, 17 columns and 31 rows per stage instead of 19 and 33).
+#[test]
+fn without_the_targets_roll_in_the_qp_the_push_keeps_the_same_constraints() {
+    in_contact_force_and_envelope(false);
+}
+
+fn in_contact_force_and_envelope(target_roll: bool) {
     let (rx, ry) = touching_rel(0.04);
     let mut s = situation(rx, ry, -0.1, 15.0, 16.0);
     // Engaged: the default reference opens the corridor.
@@ -89,9 +100,13 @@ fn in_contact_the_planned_force_stays_in_the_corridor_and_the_bullet_in_its_enve
     settings.mode = ScpMode::Converged;
     settings.max_scp_iter = 20;
     settings.time_budget = 10.0;
+    settings.qp.target_roll = target_roll;
     let mut m = mpc_with(settings.clone(), four_dof(&params()));
+    let ((n, rows), _) = m.qp_sizes();
+    assert_eq!((n, rows), if target_roll { (380, 660) } else { (340, 620) });
     let out = m.solve(&input(&s, Some(&road()))).unwrap();
     assert!(out.status != MpcStatus::QpFailure, "{out:?}");
+    assert!(m.last_qp_coupled(), "touching: the coupled QP");
     eprintln!("{out:?}");
     let plan = m.plan();
     let c = &settings.contact;
