@@ -21,7 +21,7 @@ pytestmark = pytest.mark.skipif(not hasattr(_core, "Planner"), reason="planner n
 # A 3-lane straight road along +X, centre line at Y = 0; the target cruises in the middle
 # lane at 15 m/s, the bullet 6 m behind and 2.5 m to its left, 2 m/s faster.
 TARGET = np.array([15.0, 0.0, 0.0, 0.0, 0.0, 0.0, 100.0, 0.0])  # [vx, vy, yaw, r, p, phi, X, Y]
-BULLET = np.array([94.0, 2.5, 0.0, 17.0, 0.0, 0.0])  # [X, Y, yaw, vx, vy, r]
+BULLET = np.array([95.0, 2.5, 0.0, 17.0, 0.0, 0.0])  # [X, Y, yaw, vx, vy, r]; 5 m back: the 0.8 s window fits the look-ahead
 # A stopped car in the middle lane 20 m ahead of the target: [x, y, heading, vx, vy, l, w].
 BLOCKER = [[120.0, 0.0, 0.0, 0.0, 0.0, 4.5, 1.8]]
 # Determinism checks lift the wall-clock limits (QP time limit, MPC time budget): with them, a

@@ -140,7 +140,8 @@ pub struct QpSettings {
     /// leaves them out of the QP's linearisation (their deviation from the linearisation
     /// trajectory is taken as zero), 17 instead of 19 columns per stage and a factor
     /// about half the size; the nonlinear rollouts and the merit keep the full model.
-    /// Measured in `docs/mpc.md` ("The target's roll in the QP").
+    /// Measured in `docs/mpc.md` ("The target's roll in the QP"). The planner's QPs, which
+    /// share this struct, have no target states and ignore it.
     pub target_roll: bool,
 }
 

@@ -122,8 +122,11 @@ fn the_package_is_consistent_on_scripted_situations() {
     let force_max = s.force_max_g * params().target.mass * 9.81;
     let road = road();
     let cases = [
-        // (rel x, rel y, v target, v bullet, expected mode)
-        (-6.0, 2.5, 15.0, 17.0, Mode::Pit),
+        // (rel x, rel y, v target, v bullet, expected mode). The contact window (0.8 s) must
+        // fit the 2 s look-ahead after the bullet's earliest arrival, so a bullet 5 m back
+        // commits; from 6 m back (arrival ≈ 1.3 s) it still chases.
+        (-5.0, 2.5, 15.0, 17.0, Mode::Pit),
+        (-6.0, 2.5, 15.0, 17.0, Mode::Chase),
         (-5.0, -2.4, 15.0, 16.0, Mode::Pit),
         (-30.0, 3.0, 15.0, 17.0, Mode::Chase),
         (-3.7, 2.0, 15.0, 16.0, Mode::Pit),
@@ -155,7 +158,7 @@ fn the_package_is_consistent_on_scripted_situations() {
 fn an_obstacle_where_the_target_would_spin_changes_the_decision_or_aborts() {
     let s = PlannerSettings::default();
     let road = road();
-    let (xt, xb) = states(&road, -6.0, 2.5, 15.0, 17.0);
+    let (xt, xb) = states(&road, -5.0, 2.5, 15.0, 17.0);
     let mut p = planner(s.clone());
     let free = p.plan(&input(&road, &[], xt, xb)).unwrap().clone();
     assert_eq!(free.mode, Mode::Pit);
@@ -215,7 +218,7 @@ fn no_feasible_decision_is_reported_with_its_reason() {
 #[test]
 fn the_same_inputs_give_the_same_package() {
     let road = road();
-    let (xt, xb) = states(&road, -6.0, 2.5, 15.0, 17.0);
+    let (xt, xb) = states(&road, -5.0, 2.5, 15.0, 17.0);
     let obstacles = [Obstacle {
         x: 150.0,
         y: -3.5,
@@ -259,7 +262,7 @@ fn bad_input_is_an_error_not_a_panic() {
         };
         planner::MAX_OBSTACLES + 1
     ];
-    let (xt, xb) = states(&road, -6.0, 2.5, 15.0, 17.0);
+    let (xt, xb) = states(&road, -5.0, 2.5, 15.0, 17.0);
     assert_eq!(
         p.plan(&input(&road, &many, xt, xb)).unwrap_err(),
         planner::PlanError::TooManyObstacles
