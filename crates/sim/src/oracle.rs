@@ -36,6 +36,10 @@ pub struct OracleSettings {
     pub min_remaining: f64,
     /// Try every shove instead of stopping at the first success (to count them).
     pub exhaustive: bool,
+    /// Sides to try: +1 the target's left (pushed right), −1 its right.
+    pub sides: Vec<f64>,
+    /// Only contact times within `[from, to]` (s), if given (still from the reach bound on).
+    pub window: Option<[f64; 2]>,
     /// Screening settings for the bullet's reach bound.
     pub screen: ScreenSettings,
 }
@@ -48,6 +52,8 @@ impl Default for OracleSettings {
             contact_back: 0.3,
             min_remaining: 1.0,
             exhaustive: false,
+            sides: vec![1.0, -1.0],
+            window: None,
             screen: ScreenSettings::default(),
         }
     }
@@ -211,8 +217,13 @@ pub fn ideal_pit(sc: &Scenario, settings: &OracleSettings) -> Result<OracleRepor
         if t + 1e-9 < t_reach || t > t_last + 1e-9 || snap.monitor.outcome().is_some() {
             continue;
         }
+        if let Some([from, to]) = settings.window {
+            if t + 1e-9 < from || t > to + 1e-9 {
+                continue;
+            }
+        }
         for &dv in &settings.shoves {
-            for side in [1.0, -1.0] {
+            for &side in &settings.sides {
                 tried += 1;
                 let mut run = snap.clone();
                 run.shove(side, dv, pt.lr, pt.width, settings.contact_back);
