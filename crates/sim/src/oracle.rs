@@ -17,9 +17,9 @@
 
 use crate::outcome::{FailureCause, Monitor, Observation, Outcome, Status};
 use crate::scenario::{Scenario, ScenarioError};
-use crate::screen::{reach_time, ScreenSettings};
+use crate::screen::{reach_time, target_alone, ScreenSettings};
 use dynamics::geometry::{rotate, Vec2};
-use dynamics::plant::{Plant, PlantConfig, VehicleInit, Which};
+use dynamics::plant::{Plant, Which};
 use serde::{Deserialize, Serialize};
 
 /// What the oracle tries (serde with defaults).
@@ -56,6 +56,53 @@ impl Default for OracleSettings {
             window: None,
             screen: ScreenSettings::default(),
         }
+    }
+}
+
+impl OracleSettings {
+    /// # Errors
+    /// [`ScenarioError::Field`] (line 0) naming the first bad setting.
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        let bad = |field: &str, message: String| {
+            Err(ScenarioError::Field {
+                line: 0,
+                field: format!("oracle.{field}"),
+                message,
+            })
+        };
+        if self.shoves.is_empty() || self.shoves.iter().any(|v| !v.is_finite() || *v < 0.0) {
+            return bad(
+                "shoves",
+                format!("{:?}: need at least one, each finite and ≥ 0", self.shoves),
+            );
+        }
+        for (field, v) in [
+            ("time_step", self.time_step),
+            ("contact_back", self.contact_back),
+            ("min_remaining", self.min_remaining),
+        ] {
+            if !v.is_finite() || v < 0.0 || (field == "time_step" && v == 0.0) {
+                return bad(
+                    field,
+                    format!(
+                        "{v}: must be finite and {}",
+                        if field == "time_step" { "> 0" } else { "≥ 0" }
+                    ),
+                );
+            }
+        }
+        if self.sides.is_empty() || self.sides.iter().any(|&v| v != 1.0 && v != -1.0) {
+            return bad("sides", format!("{:?}: each must be +1 or −1", self.sides));
+        }
+        if let Some([from, to]) = self.window {
+            if !(from.is_finite() && to.is_finite() && from <= to) {
+                return bad(
+                    "window",
+                    format!("[{from}, {to}]: must be finite with from ≤ to"),
+                );
+            }
+        }
+        Ok(())
     }
 }
 
@@ -148,26 +195,13 @@ impl Alone {
 /// Run the ideal-PIT search on one scenario.
 ///
 /// # Errors
-/// [`ScenarioError`] if the scenario's road or parameter set cannot be built.
+/// [`ScenarioError`] if the scenario's road or parameter set cannot be built, or a setting
+/// is bad ([`OracleSettings::validate`]).
 pub fn ideal_pit(sc: &Scenario, settings: &OracleSettings) -> Result<OracleReport, ScenarioError> {
+    settings.validate()?;
     let params = sc.params.load()?;
     let road = sc.build_road()?;
-    let mut plant = Plant::new(
-        &params,
-        PlantConfig {
-            mu: sc.mu,
-            ..PlantConfig::default()
-        },
-    )
-    .map_err(|e| ScenarioError::Params(e.to_string()))?;
-    plant.set_obstacles(sc.obstacles());
-    let (_, ti) = sc.initial_states(&road);
-    let parked = VehicleInit {
-        x: -1.0e5,
-        y: -1.0e5,
-        ..VehicleInit::default()
-    };
-    plant.reset(&parked, &ti);
+    let plant = target_alone(sc, &params, &road)?;
     let steps_per = (DT / plant.dt()).round().max(1.0) as usize;
     let mut base = Alone {
         plant,

@@ -194,21 +194,7 @@ pub fn screen(sc: &Scenario, settings: &ScreenSettings) -> Result<ScreenReport, 
         return Ok(ScreenReport::rejected(reason));
     }
     let judge = JudgeSettings::for_params(sc.params);
-    let config = PlantConfig {
-        mu: sc.mu,
-        ..PlantConfig::default()
-    };
-    let mut plant =
-        Plant::new(&params, config).map_err(|e| ScenarioError::Params(e.to_string()))?;
-    plant.set_obstacles(sc.obstacles());
-    let (_, ti) = sc.initial_states(&road);
-    // The bullet parked far from the road: the target is alone.
-    let parked = VehicleInit {
-        x: -1.0e5,
-        y: -1.0e5,
-        ..VehicleInit::default()
-    };
-    plant.reset(&parked, &ti);
+    let mut plant = target_alone(sc, &params, &road)?;
     let mut driver = sc.target_driver(&params);
     let dt = 0.05;
     let steps_per = (dt / plant.dt()).round().max(1.0) as usize;
@@ -285,6 +271,29 @@ pub fn screen(sc: &Scenario, settings: &ScreenSettings) -> Result<ScreenReport, 
         );
     }
     Ok(report)
+}
+
+/// The plant with the scenario's road friction and obstacles, the target at its initial
+/// state and the bullet parked far from the road: the target alone (screening, `oracle`).
+pub(crate) fn target_alone(
+    sc: &Scenario,
+    params: &ParamSet,
+    road: &Road,
+) -> Result<Plant, ScenarioError> {
+    let config = PlantConfig {
+        mu: sc.mu,
+        ..PlantConfig::default()
+    };
+    let mut plant = Plant::new(params, config).map_err(|e| ScenarioError::Params(e.to_string()))?;
+    plant.set_obstacles(sc.obstacles());
+    let (_, ti) = sc.initial_states(road);
+    let parked = VehicleInit {
+        x: -1.0e5,
+        y: -1.0e5,
+        ..VehicleInit::default()
+    };
+    plant.reset(&parked, &ti);
+    Ok(plant)
 }
 
 /// Earliest time the bullet can be at the PIT pose, against the target's stations sampled

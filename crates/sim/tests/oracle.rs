@@ -56,3 +56,36 @@ fn half_scale_at_walking_pace_cannot_be_spun_round_by_a_shove() {
     assert!(r.feasible.is_none(), "{r:?}");
     assert!(r.tried > 0, "{r:?}");
 }
+
+#[test]
+fn bad_settings_are_refused_naming_the_field() {
+    let sc = scenario(&common::straight());
+    for (settings, field) in [
+        (shoves(&[]), "oracle.shoves"),
+        (shoves(&[f64::NAN]), "oracle.shoves"),
+        (
+            OracleSettings {
+                time_step: 0.0,
+                ..shoves(&[1.0])
+            },
+            "oracle.time_step",
+        ),
+        (
+            OracleSettings {
+                sides: vec![0.5],
+                ..shoves(&[1.0])
+            },
+            "oracle.sides",
+        ),
+        (
+            OracleSettings {
+                window: Some([3.0, 1.0]),
+                ..shoves(&[1.0])
+            },
+            "oracle.window",
+        ),
+    ] {
+        let err = ideal_pit(&sc, &settings).unwrap_err().to_string();
+        assert!(err.contains(field), "{err}");
+    }
+}
