@@ -89,6 +89,8 @@ struct Outcome {
     road_margin: f64,
     clearance: f64,
     stop_margin: f64,
+    /// Least road margin of the free slide after the look-ahead (`check_horizon`).
+    slide_margin: f64,
 }
 
 /// The upper layer: owns its target model, its QP and every buffer.
@@ -364,7 +366,7 @@ impl Planner {
     ) {
         let heading_ok = o.heading_error <= self.settings.heading_tol;
         let tol = self.settings.violation_tol;
-        let road_ok = o.road_margin >= -tol && o.stop_margin >= -tol;
+        let road_ok = o.road_margin >= -tol && o.stop_margin >= -tol && o.slide_margin >= -tol;
         let obs_ok = o.clearance >= self.settings.obstacle_clearance - tol;
         if heading_ok && road_ok && obs_ok {
             *feasible += 1;
@@ -508,7 +510,11 @@ impl Planner {
                 Some(o) if o.clearance < self.settings.obstacle_clearance + BINDING => {
                     Infeasible::ObstacleClearance
                 }
-                Some(o) if o.road_margin < BINDING || o.stop_margin < BINDING => {
+                Some(o)
+                    if o.road_margin < BINDING
+                        || o.stop_margin < BINDING
+                        || o.slide_margin < BINDING =>
+                {
                     Infeasible::RoadBoundary
                 }
                 Some(_) => Infeasible::TerminalSetUnreachable,
@@ -751,6 +757,28 @@ impl Planner {
         [p.x, p.y, x[idx::PSI] + turn]
     }
 
+    /// The least road margin (beyond `road_margin`) of the target's footprint while it rolls
+    /// on without force from the end of the look-ahead for `check_horizon` seconds.
+    fn slide_margin(&mut self, road: &Road) -> f64 {
+        let s = &self.settings;
+        let steps = (s.check_horizon / s.dt).round() as usize;
+        let mut x = self.xs[self.n];
+        let mut least = f64::INFINITY;
+        for _ in 0..steps {
+            let c = self.contact(self.n, Vec2::zeros(), x[idx::PSI]);
+            x = self.model.step(&x, &self.input_u, &c);
+            if !x.iter().all(|v| v.is_finite()) {
+                return f64::NEG_INFINITY;
+            }
+            let cg = Vec2::new(x[idx::X], x[idx::Y]);
+            least = least.min(edge_row(road, &self.footprint(&x), cg, s.road_margin).rhs);
+            if x[idx::VX].hypot(x[idx::VY]) < 0.5 * self.len_scale.sqrt() {
+                break;
+            }
+        }
+        least
+    }
+
     /// Linearise the soft rows at the current rollout.
     fn linearise_rows(&mut self, road: &Road, obstacles: &[Obstacle]) {
         let s = &self.settings;
@@ -904,6 +932,7 @@ impl Planner {
             road_margin: current.2,
             clearance: current.3,
             stop_margin: current.4,
+            slide_margin: self.slide_margin(input.road),
         })
     }
 
@@ -1312,6 +1341,36 @@ fn assemble(
 mod tests {
     use super::*;
     use dynamics::target4dof::FourDofTarget;
+
+    /// The free slide after the look-ahead (`check_horizon`): a target rolling along the
+    /// road keeps its margin, one heading off at 0.3 rad crosses the edge within 4 s.
+    #[test]
+    fn free_slide_check_sees_the_edge() {
+        let params = ParamSet::builtin("full_size").unwrap();
+        let s = PlannerSettings {
+            check_horizon: 4.0,
+            ..PlannerSettings::default()
+        };
+        let model = Box::new(FourDofTarget::new(&params.target, 0.9, s.dt));
+        let mut p = Planner::new(&params, 0.9, model, s).unwrap();
+        let road = Road::straight(2000.0, 3, 3.5, 1.0);
+        let margin = |p: &mut Planner, psi: f64| {
+            let mut x0 = TargetState::zeros();
+            x0[idx::VX] = 15.0;
+            x0[idx::X] = 100.0;
+            x0[idx::PSI] = psi;
+            p.setup_candidate(Side::Left, p.n, 0.0);
+            p.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
+            p.rollout(&x0, false, false);
+            p.slide_margin(&road)
+        };
+        let along = margin(&mut p, 0.0);
+        let off = margin(&mut p, 0.3);
+        assert!(along > 1.0, "along the road: margin {along}");
+        assert!(off < -1.0, "heading off the road: margin {off}");
+        p.settings.check_horizon = 0.0;
+        assert_eq!(margin(&mut p, 0.3), f64::INFINITY, "off: no check");
+    }
 
     /// The chained sensitivities ∂x_k/∂F (with γ turning with ψ) against central
     /// differences of the nonlinear rollout.

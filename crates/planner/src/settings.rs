@@ -138,6 +138,9 @@ pub struct PlannerSettings {
     /// reversed heading (the yaw goes on after the look-ahead; τ is its decay time).
     pub heading_tol: f64,
     pub yaw_decay: f64,
+    /// The free slide after the look-ahead (s): each candidate's prediction is rolled on
+    /// without force for this long, and its footprint must stay inside the road (0: off).
+    pub check_horizon: f64,
     /// Deceleration of the spun, sliding target used for the post-PIT stopping point
     /// (fraction of μ g).
     pub stop_decel_fraction: f64,
@@ -182,6 +185,7 @@ impl Default for PlannerSettings {
             turn_in: 0.4,
             heading_tol: 0.6,
             yaw_decay: 0.4,
+            check_horizon: 0.0,
             stop_decel_fraction: 0.7,
             road_margin: 0.2,
             obstacle_clearance: 0.5,
@@ -271,6 +275,7 @@ impl PlannerSettings {
             ("contact_angle", self.contact_angle),
             ("overlap", self.overlap),
             ("push_speed", self.push_speed),
+            ("check_horizon", self.check_horizon),
             ("settle_time", self.settle_time),
             ("standoff", self.standoff),
             ("turn_in", self.turn_in),

@@ -11,12 +11,17 @@ fn main() {
     let scenarios = sim::load_jsonl("data/scenarios.jsonl").unwrap();
     let sc = scenarios.iter().find(|s| &s.id == id).unwrap();
     let road = sc.build_road().unwrap();
+    for o in sc.obstacles() {
+        let fp = o.footprint_at(0.0);
+        let f = road.project(fp.center);
+        println!("obstacle at s={:.1} d={:.2} ({:?})", f.s, f.d, o);
+    }
     let r = run_episode(sc, &cfg, 0).unwrap();
     for s in r.trajectory.iter().step_by(2) {
         let ft = road.project(dynamics::geometry::Vec2::new(s.target[6], s.target[7]));
         let fb = road.project(dynamics::geometry::Vec2::new(s.bullet[0], s.bullet[1]));
-        println!("t={:5.2} {:?} T: d={:5.2} ψ-h={:6.1}° v={:5.2} | B: d={:5.2} ψ-h={:6.1}° v={:5.2} | cmd ({:6.3},{:7.1}) Fn={:6.0}",
-            s.time, s.phase, ft.d, (s.target[2]-ft.heading).to_degrees(), s.target[0].hypot(s.target[1]),
+        println!("t={:5.2} {:?} Δs={:6.2} T: d={:5.2} ψ-h={:6.1}° v={:5.2} | B: d={:5.2} ψ-h={:6.1}° v={:5.2} | cmd ({:6.3},{:7.1}) Fn={:6.0}",
+            s.time, s.phase, fb.s - ft.s, ft.d, (s.target[2]-ft.heading).to_degrees(), s.target[0].hypot(s.target[1]),
             fb.d, (s.bullet[2]-fb.heading).to_degrees(), s.bullet[3], s.command[0], s.command[1], s.contact_force[0]);
     }
     println!("{:?} half width {:.2}", r.metrics, road.half_width());
