@@ -34,7 +34,8 @@ const TRACKED_B: [usize; 4] = [0, 1, 2, 3];
 /// columns `[ũ (2), f̃ (2), s (1), δx_T (8), δx_B (6)]`, 14 dynamics rows and 19 inequality
 /// rows per stage. The target is driven by nothing but f_c, so when no force is admissible
 /// anywhere over the horizon (every stage of the linearisation farther apart than
-/// `gap_release`) its prediction is exact and fixed: the *bullet-only* QP then drops the
+/// `gap_release`, or a reference that plans no force at all) its prediction is exact and
+/// fixed: the *bullet-only* QP then drops the
 /// target's states and the forces, `[ũ (2), s (1), δx_B (6)]`, 6 dynamics rows and 12
 /// inequality rows per stage, about a third of the work.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -922,6 +923,7 @@ impl CoupledMpc {
     /// Linearise the soft constraints along `lin` (states x_1 … x_N).
     fn linearise_soft(&mut self, input: &MpcInput<'_>) {
         let s = &self.settings;
+        let force_planned = input.reference.stages.iter().any(|st| st.fn_hi > 0.0);
         for k in 0..self.n {
             let (xt, xb) = (&self.lin.xt[k + 1], &self.lin.xb[k + 1]);
             let pt = Vec2::new(xt[6], xt[7]);
@@ -935,7 +937,10 @@ impl CoupledMpc {
             row.gap_b = gb;
             row.gap_t = gt;
             row.gap = g.gap;
-            let near = gap_start.min(g.gap) <= s.contact.gap_release;
+            // A force only where the linearisation has the vehicles near, and only if the
+            // reference plans one somewhere over the horizon: a reference that plans none
+            // (a chase) keeps the bullet clear of the target (ramming its rear is no PIT).
+            let near = gap_start.min(g.gap) <= s.contact.gap_release && force_planned;
             row.fn_max = if near { s.contact.force_max } else { 0.0 };
             row.band = near;
             if let Some(road) = input.road {

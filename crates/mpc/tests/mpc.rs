@@ -70,6 +70,52 @@ fn with_the_vehicles_apart_no_force_is_planned() {
     }
 }
 
+/// A chase straight behind the target, 1.5 m off its rear bumper and 2.5 m/s faster, with a
+/// reference that plans no force anywhere (its corridor closed) but asks to close in: the
+/// MPC plans no force and keeps the bullet off the target's rear (the bullet-only QP and its
+/// no-contact row). The same situation with the corridor open takes the coupled QP.
+#[test]
+fn a_reference_without_force_keeps_the_bullet_off_the_targets_rear() {
+    let p = params();
+    let (t, b) = (&p.target, &p.bullet);
+    let rel_x = -((t.length - t.cg_to_front) + b.cg_to_front + 1.5);
+    let mut s = situation(rel_x, 0.0, 0.0, 10.0, 12.5);
+    for st in &mut s.reference.stages {
+        st.rel_pos.x = rel_x + 1.0;
+        st.rel_pos.y = 0.0;
+        st.rel_speed = 2.0;
+        st.fn_lo = 0.0;
+        st.fn_hi = 0.0;
+    }
+    let mut m = mpc_with(settings(), four_dof(&p));
+    let out = m.solve(&input(&s, Some(&road()))).unwrap();
+    assert_eq!(out.status, MpcStatus::RtiStep);
+    assert!(!m.last_qp_coupled(), "no force planned: the bullet-only QP");
+    let plan = m.plan();
+    for k in 0..plan.len() {
+        assert_eq!(plan.f[k].x, 0.0, "force planned at step {k}");
+        assert!(
+            plan.pair[k + 1].gap > -0.05,
+            "the plan runs into the target's rear at step {}: gap {}",
+            k + 1,
+            plan.pair[k + 1].gap
+        );
+    }
+    for st in &mut s.reference.stages {
+        st.fn_hi = 15_000.0;
+    }
+    m.reset();
+    m.solve(&input(&s, Some(&road()))).unwrap();
+    assert!(m.last_qp_coupled(), "a force planned and the vehicles near");
+    // … and then it does plan a push on the rear bumper (what the closed corridor prevents).
+    let plan = m.plan();
+    let most = (0..plan.len()).map(|k| plan.f[k].x).fold(0.0, f64::max);
+    assert!(
+        most > 1000.0,
+        "open corridor: largest planned force {most} N"
+    );
+}
+
 #[test]
 fn in_contact_the_planned_force_stays_in_the_corridor_and_the_bullet_in_its_envelope() {
     in_contact_force_and_envelope(true);

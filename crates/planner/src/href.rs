@@ -182,14 +182,21 @@ impl Approach {
         let reach = self.lateral_speed * (tau - self.time).max(0.0);
         let y = rel.y + (goal.y - rel.y).clamp(-reach, reach);
         let mut x = rel.x + (goal.x - rel.x) * a;
-        if (goal.y - y).abs() > self.length_scale {
-            x = x.min(self.behind_x.max(rel.x));
-        }
-        let v = if tau < self.arrive {
+        let mut v = if tau < self.arrive {
             ((goal.x - rel.x) / span).clamp(-self.speed_cap, self.speed_cap)
         } else {
             0.0
         };
+        if (goal.y - y).abs() > self.length_scale {
+            let cap = self.behind_x.max(rel.x);
+            if x > cap {
+                // Held behind the rear bumper until the bullet is on the goal's line: no
+                // closing speed there either (it would drive the bullet into the target's
+                // rear against the position it is held at).
+                x = cap;
+                v = v.min(0.0);
+            }
+        }
         StageReference {
             rel_pos: Vec2::new(x, y),
             rel_heading: 0.0,
