@@ -107,6 +107,9 @@ class BenchConfig:
     uncertainty: Optional[Dict[str, Any]] = None
     cases: bool = True
     figures: bool = True
+    # "wall": real runtimes and real time budgets (the paper's table); "simulated": a tick
+    # clock, so every episode is repeatable to the step whatever the machine's load.
+    clock: str = "wall"
 
     def validate(self) -> "BenchConfig":
         known = list(_core.episode_presets())
@@ -125,6 +128,8 @@ class BenchConfig:
             raise BenchError(f"--workers = {self.workers}: must be >= 0 (0: all cores)")
         if self.seed < 0:
             raise BenchError(f"--seed = {self.seed}: must be >= 0")
+        if self.clock not in ("wall", "simulated"):
+            raise BenchError(f"--clock = {self.clock!r}: must be wall or simulated")
         if not self.scenarios.is_file():
             raise BenchError(f"--scenarios: {self.scenarios}: no such file")
         if not self.models.is_dir():
@@ -139,10 +144,13 @@ class BenchConfig:
 
     def episode_config(self, name: str) -> str:
         """The configuration text handed to the core: a preset name, or the preset with the
-        uncertainty override as JSON."""
-        if self.uncertainty is None:
+        uncertainty override and the clock as JSON."""
+        if self.uncertainty is None and self.clock == "wall":
             return name
-        return json.dumps({"preset": name, "uncertainty": self.uncertainty})
+        doc: Dict[str, Any] = {"preset": name, "clock": self.clock}
+        if self.uncertainty is not None:
+            doc["uncertainty"] = self.uncertainty
+        return json.dumps(doc)
 
     def n_workers(self) -> int:
         return self.workers or (os.cpu_count() or 1)
