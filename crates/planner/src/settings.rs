@@ -295,6 +295,13 @@ impl PlannerSettings {
                 return Err(invalid(name, format!("must be finite and >= 0 (got {v})")));
             }
         }
+        // The free slide is rolled out step by step inside every candidate's evaluation.
+        if self.check_horizon > 30.0 {
+            return Err(invalid(
+                "check_horizon",
+                format!("must be at most 30 s (got {})", self.check_horizon),
+            ));
+        }
         let steps = self.horizon / self.dt;
         if (steps - steps.round()).abs() > 1e-9 || !(4.0..=400.0).contains(&steps.round()) {
             return Err(invalid(
@@ -541,6 +548,8 @@ mod tests {
             ("[phases]\nrelease_gap = 0.01", "phases.release_gap"),
             ("[planner]\ndt = 0.1", "planner.dt"),
             ("[mpc]\nhorizon = 1", "horizon"),
+            ("[planner]\ncheck_horizon = 1e9", "check_horizon"),
+            ("[planner]\ncheck_horizon = -1.0", "check_horizon"),
         ];
         for (text, field) in cases {
             let e = ControllerSettings::from_toml_str(text)

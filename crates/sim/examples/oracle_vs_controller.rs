@@ -32,7 +32,7 @@ fn main() {
         std::process::exit(2);
     });
     let chosen: Vec<_> = scenarios.iter().skip(first).take(count).collect();
-    let mut lines: Vec<(usize, String, [bool; 5])> = std::thread::scope(|s| {
+    let mut lines: Vec<(usize, String, [bool; 4])> = std::thread::scope(|s| {
         let hs: Vec<_> = (0..threads)
             .map(|w| {
                 let (chosen, cfg) = (&chosen, &cfg);
@@ -91,7 +91,7 @@ fn main() {
                                 earlier,
                                 sizes
                             ),
-                            [ok, same, other, earlier, true],
+                            [ok, same, other, earlier],
                         ));
                     }
                     out
@@ -106,7 +106,7 @@ fn main() {
     }
     let failed: Vec<_> = lines.iter().filter(|l| !l.2[0]).collect();
     let n = failed.len();
-    let c = |f: &dyn Fn(&[bool; 5]) -> bool| failed.iter().filter(|l| f(&l.2)).count();
+    let c = |f: &dyn Fn(&[bool; 4]) -> bool| failed.iter().filter(|l| f(&l.2)).count();
     println!("episodes with a contact: {} ({} failed)", lines.len(), n);
     println!("  of the failed: a shove at the controller's time would have saved it on its side {}, only on the other side {}, on neither but earlier {}, never near or before {}",
         c(&|b| b[1]), c(&|b| !b[1] && b[2]), c(&|b| !b[1] && !b[2] && b[3]), c(&|b| !b[1] && !b[2] && !b[3]));
