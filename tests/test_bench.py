@@ -106,6 +106,16 @@ def test_per_episode_results_agree_with_the_summary(bench_run):
             v = r[k]
             if v not in (None, "") and v == v:
                 assert float(v) >= 0.0, (k, v)
+        # Where the first touch landed on the target (body frame, m): within its footprint
+        # (4.51 m × 1.61 m, c.g. 2.12 m behind the front), and only with a contact.
+        x, y = r["impact_x"], r["impact_y"]
+        if x not in (None, "") and x == x:
+            assert int(r["contacts"]) >= 1
+            assert -2.45 <= float(x) <= 2.17 and abs(float(y)) <= 0.86, (x, y)
+        # The target's speed when it first came within ε_ψ of the reversed heading.
+        v = r["reversed_speed"]
+        if v not in (None, "") and v == v:
+            assert float(v) >= 0.0 and float(r["reversed_at"]) > 0.0
 
 
 def test_representative_cases_are_drawn_and_logged(bench_run):

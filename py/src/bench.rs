@@ -101,6 +101,10 @@ fn run_episode<'py>(
     d.set_item("contacts", m.contacts)?;
     d.set_item("impact_speed", m.impact_speed)?;
     d.set_item("impact_angle", m.impact_angle)?;
+    d.set_item("impact_x", m.impact_point.map(|p| p[0]))?;
+    d.set_item("impact_y", m.impact_point.map(|p| p[1]))?;
+    d.set_item("reversed_at", m.reversed_at)?;
+    d.set_item("reversed_speed", m.reversed_speed)?;
     d.set_item("sim_time", r.sim_time)?;
     d.set_item("control_steps", r.control_steps)?;
     for (prefix, s) in [("plan", &r.plan), ("ctrl", &r.ctrl)] {

@@ -34,7 +34,7 @@ fn main() {
                 ok += usize::from(r.success());
                 wall += r.wall_time;
                 println!(
-                    "{} {:16} {:8} {:>20} {:7} at {:5.2} s | herr {:5.2} margin {:6.2} contacts {} | plan {:5.2}/{:5.2} ms ({}) ctrl {:5.2}/{:5.2} ms | {:?} {:?} | fail {} budget {} | wall {:.2} s",
+                    "{} {:16} {:8} {:>20} {:7} at {:5.2} s | herr {:5.2} margin {:6.2} contacts {} | plan {:5.2}/{:5.2} ms ({}) ctrl {:5.2}/{:5.2} ms | {:?} {:?} | fail {} budget {} | wall {:.2} s | impact {} | reversed {}",
                     r.scenario,
                     sc.category.name(),
                     sc.adhesion.name(),
@@ -53,7 +53,15 @@ fn main() {
                     r.abort,
                     r.mpc_failures,
                     r.mpc_time_budget,
-                    r.wall_time
+                    r.wall_time,
+                    match (r.metrics.impact_point, r.metrics.impact_speed) {
+                        (Some([x, y]), Some(v)) => format!("x {x:.2} y {y:.2} v {v:.2}"),
+                        _ => "-".to_owned(),
+                    },
+                    match (r.metrics.reversed_at, r.metrics.reversed_speed) {
+                        (Some(t), Some(v)) => format!("t {t:.2} v {v:.2}"),
+                        _ => "-".to_owned(),
+                    },
                 );
             }
             Err(e) => println!("{}: error: {e}", sc.id),

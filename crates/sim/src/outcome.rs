@@ -216,6 +216,18 @@ pub struct Metrics {
     /// contact).
     #[serde(default)]
     pub impact_angle: Option<f64>,
+    /// Point of action of the first contact in the target's body frame, relative to its
+    /// c.g. (m; x forward, y left): the rear quarter is behind the rear axle (`None` without
+    /// contact).
+    #[serde(default)]
+    pub impact_point: Option<[f64; 2]>,
+    /// Time (s) of the first observation with the target within ε_ψ of the reversed
+    /// heading, and its speed |v| then (m/s): how much of its speed a spun target keeps
+    /// (`None` if it never reversed).
+    #[serde(default)]
+    pub reversed_at: Option<f64>,
+    #[serde(default)]
+    pub reversed_speed: Option<f64>,
 }
 
 /// A vehicle of the episode (for [`Metrics::failed_vehicle`]).
@@ -373,6 +385,9 @@ impl Monitor {
                 failed_vehicle: None,
                 impact_speed: None,
                 impact_angle: None,
+                impact_point: None,
+                reversed_at: None,
+                reversed_speed: None,
             },
         })
     }
@@ -487,12 +502,15 @@ impl Monitor {
         }
     }
 
-    /// The relative speed and angle of the first contact (kept once recorded).
+    /// The relative speed, angle and point of the first contact (kept once recorded).
     fn record_impact(&mut self, plant: &Plant) {
         if self.metrics.impact_speed.is_none() {
             let (b, t) = (plant.body(Which::Bullet), plant.body(Which::Target));
             self.metrics.impact_speed = Some((b.vel - t.vel).norm());
             self.metrics.impact_angle = Some(wrap_angle(b.yaw - t.yaw).abs());
+            self.metrics.impact_point = plant
+                .contact()
+                .map(|c| [c.point_in_target.x, c.point_in_target.y]);
         }
     }
 
@@ -562,6 +580,10 @@ impl Monitor {
 
         let err = self.heading_error(&obs.target);
         self.metrics.terminal_heading_error = err;
+        if err <= self.eps_psi && self.metrics.reversed_at.is_none() {
+            self.metrics.reversed_at = Some(t);
+            self.metrics.reversed_speed = Some(obs.target[0].hypot(obs.target[1]));
+        }
 
         if boundary {
             self.metrics.failed_vehicle = Party::of(over[0], over[1]);

@@ -61,6 +61,10 @@ fn a_target_reversed_and_at_rest_succeeds_after_the_dwell() {
     assert!(me.success && me.at_rest && me.cause.is_none());
     assert!((me.terminal_heading_error - 0.2).abs() < 1e-9);
     assert!(me.min_margin > 0.0 && !me.boundary_violation && !me.secondary_collision);
+    // First within ε_ψ of π while still spinning: ψ = 0.9 π at t = 0.9 s (error 0.31 rad),
+    // at 5 m/s; the later observations do not overwrite it.
+    assert!((me.reversed_at.unwrap() - 0.9).abs() < 1e-9, "{:?}", me.reversed_at);
+    assert!((me.reversed_speed.unwrap() - 5.0).abs() < 1e-12);
 }
 
 #[test]

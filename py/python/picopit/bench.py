@@ -385,7 +385,8 @@ def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
 EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion", "params", "mu",
                   "seed", "model", "param_count", "upper_layer", "success", "at_rest", "cause", "decided_at",
                   "terminal_heading_error", "min_margin", "boundary_violation", "secondary_collision",
-                  "contacts", "impact_speed", "impact_angle", "sim_time", "control_steps", "plan_count",
+                  "contacts", "impact_speed", "impact_angle", "impact_x", "impact_y", "reversed_at",
+                  "reversed_speed", "sim_time", "control_steps", "plan_count",
                   "plan_ms_median", "plan_ms_p99", "plan_ms_max", "ctrl_count", "ctrl_ms_median",
                   "ctrl_ms_p99", "ctrl_ms_max",
                   "final_phase", "abort", "mpc_failures", "mpc_time_budget", "wall_time", "error")
