@@ -45,7 +45,7 @@ def test_bench_writes_the_tables_json_episodes_and_figures(bench_run):
     proc, tmp = bench_run
     assert proc.returncode == 0, proc.stderr
     run = tmp / "run"
-    for name in ("summary.md", "summary.csv", "summary.json", "panels.png"):
+    for name in ("summary.md", "summary.csv", "summary.json", "panels.png", "contacts.png"):
         assert (run / name).stat().st_size > 0, name
     doc = json.loads((tmp / "out" / "summary.json").read_text())
     assert doc == json.loads((run / "summary.json").read_text())
@@ -177,6 +177,17 @@ def test_the_default_scene_set_is_a_fixed_stratified_subset():
         share = SUBSET_SIZE * count / len(scenarios)
         assert max(1, int(share)) <= got <= int(share) + 1, (key, got, share)
     assert len(stratified_subset(scenarios[:10], 128)) == 10
+
+
+def test_the_contact_figure_bins_success_by_value_and_skips_missing_ones():
+    from picopit.bench import _binned_success
+
+    rows = [{"v": 0.5, "success": True}, {"v": 1.5, "success": False}, {"v": 1.7, "success": True},
+            {"v": None, "success": True}, {"v": float("nan"), "success": True}, {"v": 9.0, "success": True}]
+    rate, n = _binned_success(rows, "v", (0.0, 1.0, 2.0, 3.0))
+    # The episodes without the value, and the one beyond the last edge, count nowhere.
+    assert n.tolist() == [1, 2, 0]
+    assert rate[0] == 100.0 and rate[1] == 50.0 and np.isnan(rate[2])
 
 
 def test_the_episode_binding_refuses_bad_input_and_records_on_request():

@@ -11,6 +11,9 @@ out over local processes or a Ray cluster, and writes the paper's tables and fig
   failure-cause breakdown. JSON shape: ``{"configs": {"<name>": {"success_rate": ...}}}``.
 * ``episodes.parquet`` -- one row per episode (``episodes.csv`` when pyarrow is missing).
 * ``panels.png`` -- A: success by road and adhesion, B: failure composition, C: runtimes.
+* ``contacts.png`` -- D: success by where the first contact landed along the target, E: by
+  the relative speed at that contact, F: the share of its start speed a spun target kept
+  when it first came round to the reversed heading, successes against failures.
 * ``case_success.png``, ``case_failure.png`` -- representative episodes (trajectories on the
   road, states, bullet inputs), and ``cases.mcap`` with both (JSON-schema channels).
 
@@ -382,7 +385,7 @@ def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
             w.writerow([name] + ["" if s.get(k) is None else s.get(k) for k in keys])
 
 
-EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion", "params", "mu",
+EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion", "params", "mu", "target_speed",
                   "seed", "model", "param_count", "upper_layer", "success", "at_rest", "cause", "decided_at",
                   "terminal_heading_error", "min_margin", "boundary_violation", "secondary_collision",
                   "contacts", "impact_speed", "impact_angle", "impact_x", "impact_y", "reversed_at",
@@ -398,7 +401,7 @@ def episode_table(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[
         m = meta[r["index"]]
         d = {k: r.get(k) for k in EPISODE_FIELDS}
         d.update(scenario=m["id"], category=m["category"], road=m["road"], adhesion=m["adhesion"],
-                 params=m["params"], mu=m["mu"])
+                 params=m["params"], mu=m["mu"], target_speed=m.get("target_speed"))
         out.append(d)
     return out
 
@@ -734,7 +737,9 @@ def run(cfg: BenchConfig, progress: bool = True) -> BenchResult:
     scenarios, scenes = load_scenes(cfg)
     meta = {i: {"id": scenarios[i]["id"], "category": scenarios[i]["category"],
                 "road": road_type(scenarios[i]["category"]), "adhesion": scenarios[i]["adhesion"],
-                "params": scenarios[i]["params"], "mu": scenarios[i]["mu"]} for i in scenes}
+                "params": scenarios[i]["params"], "mu": scenarios[i]["mu"],
+                "target_speed": math.hypot(scenarios[i]["target"]["vx"], scenarios[i]["target"]["vy"])}
+            for i in scenes}
     models = str(cfg.models.resolve())
     tasks = [Task(i, json.dumps(scenarios[i]), c, cfg.episode_config(c), episode_seed(cfg.seed, i), models)
              for c in cfg.configs for i in scenes]
@@ -792,6 +797,81 @@ def machine() -> str:
     return f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores, {cpu}, Python {platform.python_version()}"
 
 
+# Bins of the contact figure (full-size scenes; the target's rear bumper is 2.39 m and its rear
+# axle 1.42 m behind its c.g.).
+IMPACT_X_EDGES = (-2.45, -2.2, -1.8, -1.4, -1.0, 0.0, 2.2)
+IMPACT_V_EDGES = (0.0, 2.0, 3.0, 4.0, 5.0, 8.0)
+
+
+def _binned_success(rows: Sequence[Mapping[str, Any]], key: str, edges: Sequence[float]):
+    """Success % and counts per bin of ``key`` (episodes with that value only)."""
+    n = np.zeros(len(edges) - 1)
+    ok = np.zeros(len(edges) - 1)
+    for r in rows:
+        v = _finite(r.get(key))
+        if v is None:
+            continue
+        j = int(np.searchsorted(edges, v, side="right")) - 1
+        if 0 <= j < len(n):
+            n[j] += 1
+            ok[j] += bool(r.get("success"))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 0, 100.0 * ok / np.maximum(n, 1), np.nan), n
+
+
+def plot_contacts(table: Sequence[Mapping[str, Any]], names: Sequence[str], path: Path) -> None:
+    """D: success by the first contact's point along the target; E: by the relative speed
+    at it (full-size episodes with a contact, per configuration); F: the share of its start
+    speed a spun target kept at its first reversal, successes against failures."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
+    full = [r for r in table if r.get("params") == "full_size"]
+    focus = "picopinn" if "picopinn" in names else (names[0] if names else "")
+    for ax, key, edges, label, title in (
+            (axes[0], "impact_x", IMPACT_X_EDGES, "first contact along the target, body x (m)",
+             "D  success by where the first contact landed"),
+            (axes[1], "impact_speed", IMPACT_V_EDGES, "relative speed at the first contact (m/s)",
+             "E  success by the speed of the first contact")):
+        centres = 0.5 * (np.array(edges[:-1]) + np.array(edges[1:]))
+        for i, name in enumerate(names):
+            rate, n = _binned_success([r for r in full if r.get("config") == name], key, edges)
+            ax.plot(centres, rate, "o-", color=f"C{i}", label=name)
+            if name == focus:
+                for c, k in zip(centres, n):
+                    if k:
+                        ax.annotate(f"{int(k)}", (c, 2), ha="center", fontsize=7, color="#666")
+        ax.text(0.01, 0.99, f"grey: {focus} episodes per bin", transform=ax.transAxes, ha="left",
+                va="top", fontsize=7, color="#666")
+        for e in edges:
+            ax.axvline(e, color="#ddd", lw=0.8, zorder=0)
+        ax.set_xlabel(label)
+        ax.set_ylabel("success (%)")
+        ax.set_ylim(0, 100)
+        ax.set_title(title)
+        ax.legend(fontsize=8)
+    axes[0].axvspan(-2.2, -1.4, color="#e5f5e0", zorder=0)
+    axes[0].text(-1.8, 90, "rear quarter", ha="center", va="top", fontsize=8, color="#31a354")
+    ax = axes[2]
+    kept = {True: [], False: []}
+    for r in table:
+        vr, v0 = _finite(r.get("reversed_speed")), _finite(r.get("target_speed"))
+        if r.get("config") == focus and vr is not None and v0 and int(r.get("contacts") or 0) > 0:
+            kept[bool(r.get("success"))].append(vr / v0)
+    bins = np.linspace(0.0, 1.0, 21)
+    for ok, color, lab in ((True, "#31a354", "success"), (False, "#e6550d", "failure")):
+        if kept[ok]:
+            ax.hist(kept[ok], bins=bins, alpha=0.6, color=color,
+                    label=f"{lab} (n={len(kept[ok])}, median {np.median(kept[ok]):.2f})")
+    ax.set_xlabel("speed at the first reversal / start speed")
+    ax.set_ylabel("spun targets")
+    ax.set_title(f"F  speed a spun target kept ({focus})")
+    if kept[True] or kept[False]:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[str, Any]) -> Dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     paths: Dict[str, Path] = {}
@@ -821,6 +901,8 @@ def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[
     if cfg.figures:
         paths["panels"] = out / "panels.png"
         plot_panels(res.summary, paths["panels"])
+        paths["contacts"] = out / "contacts.png"
+        plot_contacts(table, list(cfg.configs), paths["contacts"])
         cases = {k: v for k, v in res.cases.items() if v is not None and v.get("trajectory") is not None}
         for kind, case in cases.items():
             sc = _core.validate_scenario_line(json.dumps(_scenario_by_id(cfg, case["scenario"])))
