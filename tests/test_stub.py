@@ -98,3 +98,18 @@ def test_class_members_match(cls_name):
             assert stub_params(f) == runtime_params(cls), f"{cls_name}.__init__"
         else:
             assert stub_params(f) == runtime_params(getattr(cls, f.name)), f"{cls_name}.{f.name}"
+
+
+def test_the_episode_result_keys_match_the_stub():
+    """``EpisodeResult`` in the stub lists exactly the keys ``run_episode`` returns."""
+    import json
+
+    tree = stub_tree()
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "EpisodeResult")
+    stub_keys = {n.target.id for n in cls.body if isinstance(n, ast.AnnAssign)}
+    root = Path(__file__).resolve().parents[1]
+    with open(root / "data" / "scenarios.jsonl") as f:
+        sc = json.loads(f.readline())
+    sc["t_max"] = 1.0
+    r = _core.run_episode(json.dumps(sc), "4dof", 0)
+    assert set(r) == stub_keys, (set(r) ^ stub_keys)

@@ -554,6 +554,8 @@ class EpisodeResult(TypedDict):
     param_count: int
     upper_layer: bool
     success: bool
+    at_rest: bool
+    """The success was the target at rest reversed (not only settled, still rolling, at T_max)."""
     cause: Optional[str]
     """First failure cause: ``decision_infeasible``, ``no_termination``,
     ``boundary_violation``, ``secondary_collision``, ``unsafe_rebound``; None on success."""
@@ -565,6 +567,17 @@ class EpisodeResult(TypedDict):
     boundary_violation: bool
     secondary_collision: bool
     contacts: int
+    impact_speed: Optional[float]
+    """m/s, |v_B - v_T| of the two c.g. at the first contact; None without contact."""
+    impact_angle: Optional[float]
+    """rad, |wrap(psi_B - psi_T)| at the first contact; None without contact."""
+    impact_x: Optional[float]
+    impact_y: Optional[float]
+    """m, the first contact's point in the target's body frame (x forward, y left)."""
+    reversed_at: Optional[float]
+    reversed_speed: Optional[float]
+    """s and m/s: time and target speed at its first observation within eps_psi of the
+    reversed heading; None if it never reversed."""
     sim_time: float
     control_steps: int
     plan_count: int
