@@ -13,10 +13,12 @@ width minus the target's offset toward it.
 """
 import argparse
 import collections
-import json
+import os
 import re
 import subprocess
 from concurrent.futures import ThreadPoolExecutor
+
+from failure_map import load_episodes, load_scenarios
 
 TRACE = "./target/release/examples/trace_episode"
 STEP = re.compile(r"T: d=\s*([-\d.]+).*B: d=\s*([-\d.]+).*Fn=\s*([-\d]+)")
@@ -39,19 +41,12 @@ def main():
     ap.add_argument("--config", default='{"preset":"picopinn","clock":"simulated"}')
     ap.add_argument("--scenarios", default="data/scenarios.jsonl")
     a = ap.parse_args()
-    params = {}
-    with open(a.scenarios) as f:
-        for line in f:
-            j = json.loads(line)
-            params[j["id"]] = j["params"]
-    rows = []
-    for path in a.episodes:
-        with open(path) as f:
-            for line in f:
-                if line.startswith("sc-") and "| impact x" in line:
-                    v = line.split()
-                    rows.append({"id": v[0], "cause": v[3], "vehicle": v[4],
-                                 "spun": "| reversed t" in line})
+    if not os.path.exists(TRACE):
+        raise SystemExit(f"{TRACE} is missing: cargo build --release -p picopit-sim --example trace_episode")
+    params = {k: v["params"] for k, v in load_scenarios(a.scenarios).items()}
+    rows = [r for r in load_episodes(a.episodes) if r["impact"] is not None]
+    for r in rows:
+        r["spun"] = r["reversed"] is not None
     with ThreadPoolExecutor(2) as ex:
         traced = list(ex.map(lambda r: trace(r["id"], a.config), rows))
     for r, t in zip(rows, traced):

@@ -14,6 +14,9 @@ import statistics
 
 
 def parse(line):
+    """One line of the `episodes` example as a dict (ValueError if it is not one)."""
+    if "| impact " not in line or "| reversed " not in line:
+        raise ValueError("no '| impact' and '| reversed' fields (output of an older `episodes` example?)")
     f = line.split()
     row = {"id": f[0], "category": f[1], "adhesion": f[2], "cause": f[3]}
     row["vehicle"] = f[4] if f[4] in ("Target", "Bullet") else ""
@@ -48,20 +51,34 @@ def table(title, rows, key, order=None):
             print(f"| {k} | {len(g)} | {100.0 * sum(g) / len(g):.0f} |")
 
 
+def load_scenarios(path):
+    """Scenario id -> scenario of a dataset file."""
+    with open(path) as f:
+        return {j["id"]: j for j in map(json.loads, f)}
+
+
+def load_episodes(paths):
+    """The episode lines (`sc-...`) of the files, parsed; a line that does not parse stops the
+    script with its file and line number."""
+    rows = []
+    for path in paths:
+        with open(path) as f:
+            for n, line in enumerate(f, 1):
+                if line.startswith("sc-"):
+                    try:
+                        rows.append(parse(line))
+                    except (ValueError, IndexError) as e:
+                        raise SystemExit(f"{path}:{n}: not an `episodes` line: {e}")
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("episodes", nargs="+")
     ap.add_argument("--scenarios", default="data/scenarios.jsonl")
     a = ap.parse_args()
-    sc = {}
-    with open(a.scenarios) as f:
-        for line in f:
-            j = json.loads(line)
-            sc[j["id"]] = j
-    rows = []
-    for path in a.episodes:
-        with open(path) as f:
-            rows += [parse(l) for l in f if l.startswith("sc-")]
+    sc = load_scenarios(a.scenarios)
+    rows = load_episodes(a.episodes)
     for r in rows:
         s = sc[r["id"]]
         r["driver"] = s["driver"]["kind"]
