@@ -10,7 +10,7 @@ SEED="${SEED:-0}"
 # One torch thread: on the shared 2-core machine two threads ran ~1.6x (and, next to one busy
 # compile, ~10x) slower than one; unloaded they gain ~15 %. See docs/surrogates.md.
 export PICOPIT_THREADS="${PICOPIT_THREADS:-1}"
-EPISODES="${EPISODES:-1500}"
+EPISODES="${EPISODES:-2500}"
 SETS=("$@")
 [ ${#SETS[@]} -eq 0 ] && SETS=(full_size half_scale)
 for set in "${SETS[@]}"; do

@@ -21,7 +21,7 @@ pytest.importorskip("scipy")
 
 from picopit import _core  # noqa: E402
 from picopit.compress import TensorClusters, choose_threshold, compressed_model  # noqa: E402
-from picopit.surrogate_nn import dense_mlp, load_model, save_model  # noqa: E402
+from picopit.surrogate_nn import dense_mlp, load_model, physics_base, save_model  # noqa: E402
 
 if not hasattr(_core, "SurrogateModel"):
     pytest.skip("picopit._core.SurrogateModel (crates/pico_nn binding) is not built yet",
@@ -30,6 +30,11 @@ if not hasattr(_core, "SurrogateModel"):
 ROOT = Path(__file__).resolve().parents[1]
 N = 1000
 REL = 1e-9
+
+
+#: Every kind of base entry: kinematics, contact impulse and a μ column.
+BASE = physics_base(0.05, 1500.0, 2500.0)
+BASE[0, 10] = -0.01
 
 
 def _stats(rng):
@@ -41,12 +46,12 @@ def _stats(rng):
 def _files(tmp_path_factory):
     d = tmp_path_factory.mktemp("parity")
     rng = np.random.default_rng(20)
-    dense = dense_mlp((11, 64, 64, 64, 8), _stats(rng), seed=21, dt=0.05)
+    dense = dense_mlp((11, 64, 64, 64, 8), _stats(rng), seed=21, dt=0.05, base=BASE)
     with torch.no_grad():
         dense.theta.add_(0.05 * torch.randn(dense.param_count, generator=torch.Generator().manual_seed(22), dtype=torch.float64))
     save_model(dense, d / "dense.safetensors", kind="pinn", param_set="full_size",
                mu_range=(0.15, 1.0), provenance={"seed": "21"})
-    student = dense_mlp((11, 32, 32, 8), _stats(rng), seed=23, dt=0.05)
+    student = dense_mlp((11, 32, 32, 8), _stats(rng), seed=23, dt=0.05, base=BASE)
     with torch.no_grad():
         student.theta[:40] *= 1e-4  # pruned weights
     clusters = [TensorClusters.of(w.detach().numpy()) for w, _ in student.weights()]

@@ -24,6 +24,15 @@ IN_MEAN = np.array([15.0, 0.0, 0.0, 0.0, 0.0, 0.0, 500.0, 0.0, 0.0, 0.0, 0.55])
 IN_STD = np.array([6.0, 1.0, 0.4, 0.2, 0.03, 0.1, 800.0, 4000.0, 4000.0, 6000.0, 0.25])
 OUT_MEAN = np.array([-0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.75, 0.0])
 OUT_STD = np.array([0.3, 0.2, 0.1, 0.05, 0.01, 0.02, 0.3, 0.05])
+# The linear base o += B z: dt·[p, r, vx, vy] kinematics, the contact's rigid-body impulse
+# (1500 kg, 2500 kg m²) and a μ column.
+BASE = np.zeros((8, 11))
+BASE[4, 3] = BASE[5, 2] = BASE[6, 0] = BASE[7, 1] = DT
+BASE[0, 7] = BASE[1, 8] = DT / 1500.0
+BASE[2, 9] = DT / 2500.0
+BASE[5, 9] = DT * DT / 5000.0
+BASE[6, 7] = BASE[7, 8] = DT * DT / 3000.0
+BASE[0, 10] = -0.01
 
 
 def dense_weights(rng):
@@ -52,7 +61,7 @@ def model_tensors(weights, n_shared=None, rng=None):
                 tensors[f"layer{l}.{part}.idx"] = rng.integers(0, n_shared, v.shape, dtype=np.int32)
                 tensors[f"layer{l}.{part}.sign"] = rng.integers(-1, 2, v.shape, dtype=np.int8)
     tensors["theta"] = theta.astype(np.float64)
-    tensors.update(in_mean=IN_MEAN, in_std=IN_STD, out_mean=OUT_MEAN, out_std=OUT_STD)
+    tensors.update(in_mean=IN_MEAN, in_std=IN_STD, out_mean=OUT_MEAN, out_std=OUT_STD, base=BASE)
     return tensors
 
 
@@ -71,7 +80,7 @@ def expanded(tensors):
 def metadata(**over):
     meta = {
         "format": "picopit-mlp",
-        "version": "2",
+        "version": "3",
         "kind": "picopinn",
         "activation": "tanh",
         "layers": ",".join(map(str, WIDTHS)),
@@ -93,15 +102,14 @@ def write(path: Path, tensors, meta) -> Path:
 
 
 def reference_forward(weights, z):
-    """The network on the 11 features plus the kinematic base dt·[0, 0, 0, 0, p, r, vx, vy]."""
+    """The network on the 11 features plus the linear base B z."""
     z = np.asarray(z)
     h = (z - IN_MEAN) / IN_STD
     for l, (w, b) in enumerate(weights):
         h = w @ h + b
         if l + 1 < len(weights):
             h = np.tanh(h)
-    base = DT * np.array([0, 0, 0, 0, z[3], z[2], z[0], z[1]])
-    return OUT_MEAN + OUT_STD * h + base
+    return OUT_MEAN + OUT_STD * h + BASE @ z
 
 
 def features(x, u, fc, gamma, point, mu):
@@ -234,6 +242,10 @@ def test_model_error_is_exported_and_a_value_error():
         (lambda t, m: m.pop("dt"), "dt"),
         (lambda t, m: m.pop("features"), "features"),
         (lambda t, m: m.update(version="1"), "version"),
+        (lambda t, m: m.update(version="2"), "version"),
+        (lambda t, m: t.pop("base"), "base"),
+        (lambda t, m: t.update(base=BASE[:, :10].copy()), "base"),
+        (lambda t, m: t.update(base=np.where(BASE != 0, np.nan, 0.0)), "base"),
         (lambda t, m: m.update(layers="11,16,8"), "layer"),
         (lambda t, m: m.update(layers="10,16,16,8"), "layers"),
         (lambda t, m: m.pop("mu_range"), "mu_range"),

@@ -22,8 +22,8 @@ from picopit.cli import main  # noqa: E402
 from picopit.compress import TensorClusters, choose_threshold, compressed_model  # noqa: E402
 from picopit.physics import FourDof  # noqa: E402
 from picopit.surrogate_nn import (FEATURES, OUTPUTS, ModelFileError, apply_increments,  # noqa: E402
-                                  dense_mlp, features, increments, kinematic_base, load_model,
-                                  save_model)
+                                  dense_mlp, features, increments, linear_base, load_model,
+                                  physics_base, save_model)
 from picopit.train import Split, physics_targets  # noqa: E402
 
 
@@ -43,6 +43,12 @@ def _random_inputs(rng, n, contact=True):
 
 def _t(a):
     return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64))
+
+
+#: A linear base with every kind of entry: kinematics, contact impulse (1500 kg, 2500 kg m²)
+#: and a μ column.
+BASE = physics_base(0.05, 1500.0, 2500.0)
+BASE[0, 10] = -0.01
 
 
 def _stats(rng):
@@ -117,23 +123,47 @@ def test_increments_round_trip_and_feature_invariance():
     assert torch.allclose(z1[:, 9], z1[:, 7] * 0 + _t(point[:, 0]) * z1[:, 8] - _t(point[:, 1]) * z1[:, 7])
 
 
-def test_network_adds_the_kinematic_base_to_its_residual():
-    """o = dt·[0, 0, 0, 0, p, r, vx, vy] + out_mean + out_std ⊙ y: a network whose last layer
-    is zero predicts exactly the Euler increments plus out_mean, and μ is an input."""
+def test_physics_base_is_the_kinematics_and_the_contact_impulse():
+    """The kinematic rows are dt·[p, r, vx, vy]; the impulse rows are what a free rigid body
+    does under a constant force and moment over the step."""
+    dt, m, iz = 0.05, 1500.0, 2500.0
+    kin = physics_base(dt, m, iz, "kinematic")
+    imp = physics_base(dt, m, iz, "impulse")
+    f = {n: i for i, n in enumerate(FEATURES)}
+    o = {n: i for i, n in enumerate(OUTPUTS)}
+    assert kin[o["dphi"], f["p"]] == dt and kin[o["dpsi"], f["r"]] == dt
+    assert kin[o["dx_b"], f["vx"]] == dt and kin[o["dy_b"], f["vy"]] == dt
+    assert np.count_nonzero(kin) == 4 and np.all(imp[kin != 0] == kin[kin != 0])
+    # A constant moment M from rest for dt: r = M dt / I_z, ψ = M dt² / (2 I_z); a constant
+    # force: v = F dt / m, x = F dt² / (2 m).
+    z = np.zeros(11)
+    z[f["M_z"]], z[f["f_bx"]], z[f["f_by"]] = 4000.0, 3000.0, -2000.0
+    out = imp @ z
+    assert math.isclose(out[o["dr"]], 4000.0 * dt / iz) and math.isclose(out[o["dpsi"]], 4000.0 * dt * dt / (2 * iz))
+    assert math.isclose(out[o["dvx"]], 3000.0 * dt / m) and math.isclose(out[o["dx_b"]], 3000.0 * dt * dt / (2 * m))
+    assert math.isclose(out[o["dvy"]], -2000.0 * dt / m) and math.isclose(out[o["dy_b"]], -2000.0 * dt * dt / (2 * m))
+    assert np.count_nonzero(imp) == 10
+    for bad in (dict(kind="none"), dict(mass=0.0), dict(iz=float("nan"))):
+        args = {"dt": dt, "mass": m, "iz": iz, "kind": "impulse", **bad}
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            physics_base(**args)
+
+
+def test_network_adds_the_linear_base_to_its_residual():
+    """o = B z + out_mean + out_std ⊙ y: a network whose last layer is zero predicts exactly
+    the base increments plus out_mean, and μ is an input."""
     rng = np.random.default_rng(9)
-    m = dense_mlp((11, 16, 8), _stats(rng), seed=3, dt=0.05)
+    m = dense_mlp((11, 16, 8), _stats(rng), seed=3, dt=0.05, base=BASE)
     x, u, fc, gamma, point = _random_inputs(rng, 40)
     z = features(_t(x), _t(u), _t(fc), _t(gamma), _t(point), 0.5)
-    base = kinematic_base(z, 0.05)
-    assert torch.equal(base[:, 5], 0.05 * _t(x[:, 3])) and torch.equal(base[:, 6], 0.05 * _t(x[:, 0]))
-    assert torch.equal(base[:, 4], 0.05 * _t(x[:, 4])) and torch.equal(base[:, 7], 0.05 * _t(x[:, 1]))
-    assert torch.all(base[:, :4] == 0)
+    base = linear_base(z, _t(BASE))
+    assert torch.allclose(base, z @ _t(BASE).T, rtol=0, atol=0)
     with torch.no_grad():
         assert torch.allclose(m(z), base + m.residual(z), atol=1e-15)
         w2, b2 = m.weights()[1]
         m.theta[-(w2.numel() + b2.numel()):] = 0.0
         assert torch.allclose(m(z), base + m.out_mean, atol=1e-15)
-        m2 = dense_mlp((11, 16, 8), _stats(np.random.default_rng(9)), seed=3, dt=0.05)
+        m2 = dense_mlp((11, 16, 8), _stats(np.random.default_rng(9)), seed=3, dt=0.05, base=BASE)
         z_wet = features(_t(x), _t(u), _t(fc), _t(gamma), _t(point), 0.2)
         assert not torch.allclose(m2(z), m2(z_wet))
 
@@ -145,7 +175,7 @@ def test_network_adds_the_kinematic_base_to_its_residual():
 
 def test_clustering_ties_weights_to_sign_times_centre_and_meets_budget():
     rng = np.random.default_rng(4)
-    student = dense_mlp((11, 24, 24, 8), _stats(rng), seed=5, dt=0.05)
+    student = dense_mlp((11, 24, 24, 8), _stats(rng), seed=5, dt=0.05, base=BASE)
     with torch.no_grad():  # a few near-zero weights to be pruned
         student.theta[:30] *= 1e-4
     ws = [w.detach().numpy() for w, _ in student.weights()]
@@ -176,7 +206,7 @@ def test_clustering_ties_weights_to_sign_times_centre_and_meets_budget():
 
 def _write_model(tmp_path, name="m.safetensors", compressed=False):
     rng = np.random.default_rng(6)
-    m = dense_mlp((11, 16, 16, 8), _stats(rng), seed=7, dt=0.05)
+    m = dense_mlp((11, 16, 16, 8), _stats(rng), seed=7, dt=0.05, base=BASE)
     if compressed:
         c = [TensorClusters.of(w.detach().numpy()) for w, _ in m.weights()]
         t, _ = choose_threshold(c, 40, 150, prune=0.05)
@@ -192,7 +222,7 @@ def test_model_file_round_trip(tmp_path, compressed):
     m, path = _write_model(tmp_path, compressed=compressed)
     back, meta = load_model(path)
     assert back.param_count == m.param_count and back.layers == [11, 16, 16, 8]
-    assert meta["format"] == "picopit-mlp" and meta["version"] == "2"
+    assert meta["format"] == "picopit-mlp" and meta["version"] == "3"
     assert meta["features"] == ",".join(FEATURES) and meta["outputs"] == ",".join(OUTPUTS)
     assert FEATURES[-1] == "mu" and len(FEATURES) == 11
     assert meta["layers"] == "11,16,16,8" and float(meta["dt"]) == 0.05 and meta["seed"] == "7"
@@ -231,6 +261,10 @@ def _corrupt(tmp_path, edit):
     (lambda t, m: t.__setitem__("layer1.weight.sign", t["layer1.weight.sign"][:, :5].copy()), "layer1.weight.sign"),
     (lambda t, m: m.pop("dt"), "dt"),
     (lambda t, m: m.__setitem__("version", "1"), "version"),
+    (lambda t, m: m.__setitem__("version", "2"), "version"),
+    (lambda t, m: t.pop("base"), "base"),
+    (lambda t, m: t.__setitem__("base", t["base"][:, :10].copy()), "base"),
+    (lambda t, m: t.__setitem__("base", np.where(t["base"] != 0, np.inf, 0.0)), "base"),
     (lambda t, m: m.__setitem__("features", "vx,vy"), "features"),
     (lambda t, m: m.__setitem__("layers", "11,16,8"), "layer"),
     (lambda t, m: m.pop("mu_range"), "mu_range"),

@@ -1,4 +1,4 @@
-//! Reading and validating a `picopit-mlp` v2 file (`docs/model-format.md`).
+//! Reading and validating a `picopit-mlp` v3 file (`docs/model-format.md`).
 //!
 //! Validation happens here, once; what it returns is consistent by construction, so the
 //! network code never checks again.
@@ -9,9 +9,10 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 
 /// The `format` metadata value.
 pub const FORMAT: &str = "picopit-mlp";
-/// The only `version` this loader reads. Version 1 (10 features, no road μ, no kinematic
-/// base) is refused: its models were μ-blind and none is shipped any more.
-pub const VERSION: &str = "2";
+/// The only `version` this loader reads. Version 2 (a fixed kinematic base, no `base`
+/// tensor) and version 1 (no road μ) are refused: none is shipped any more, and
+/// `models/regenerate.sh` writes version 3.
+pub const VERSION: &str = "3";
 /// The feature names, in the network's input order: the [`N_IN`] per-step features, then
 /// the road adhesion μ (a property of the model instance, [`crate::SurrogateModel::set_mu`]).
 pub const FEATURES: [&str; N_FEATURES] = [
@@ -67,6 +68,8 @@ pub(crate) struct Parsed {
     pub in_std: [f64; N_FEATURES],
     pub out_mean: [f64; N_OUT],
     pub out_std: [f64; N_OUT],
+    /// The fixed linear base `o += B z` (rows: outputs, columns: all features).
+    pub base: [[f64; N_FEATURES]; N_OUT],
 }
 
 fn container(e: impl std::fmt::Display) -> ModelError {
@@ -335,7 +338,7 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ModelError> {
     }
     let activation = meta(m, "activation");
     if activation.trim() != "tanh" {
-        return Err(bad("activation", activation, "version 2 knows only tanh"));
+        return Err(bad("activation", activation, "version 3 knows only tanh"));
     }
     check_names(m, "features", &FEATURES)?;
     check_names(m, "outputs", &OUTPUTS)?;
@@ -368,7 +371,7 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ModelError> {
     let n_layers = widths.len() - 1;
 
     // No tensor beyond what the format defines for these widths.
-    let mut known: HashSet<String> = ["theta", "in_mean", "in_std", "out_mean", "out_std"]
+    let mut known: HashSet<String> = ["theta", "in_mean", "in_std", "out_mean", "out_std", "base"]
         .into_iter()
         .map(str::to_owned)
         .collect();
@@ -407,6 +410,9 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ModelError> {
     let in_std = stats::<N_FEATURES>(&st, "in_std", true)?;
     let out_mean = stats::<N_OUT>(&st, "out_mean", false)?;
     let out_std = stats::<N_OUT>(&st, "out_std", true)?;
+    let b = f64s(&st, "base", &[N_OUT, N_FEATURES])?;
+    let base: [[f64; N_FEATURES]; N_OUT] =
+        std::array::from_fn(|k| std::array::from_fn(|j| b[k * N_FEATURES + j]));
 
     let mut layers = Vec::with_capacity(n_layers);
     for l in 1..=n_layers {
@@ -429,5 +435,6 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ModelError> {
         in_std,
         out_mean,
         out_std,
+        base,
     })
 }

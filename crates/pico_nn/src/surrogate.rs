@@ -40,15 +40,6 @@ mod feat {
     pub const MZ: usize = 9;
 }
 
-/// The kinematic base of the increments: `o_k += dt · z_j` for these `(k, j)` pairs
-/// (Δφ ← p, Δψ ← r, Δx_b ← vx, Δy_b ← vy; `docs/model-format.md`).
-const BASE: [(usize, usize); 4] = [
-    (out::DPHI, feat::P),
-    (out::DPSI, feat::R),
-    (out::DXB, feat::VX),
-    (out::DYB, feat::VY),
-];
-
 /// The state row each increment `o_k` adds to, for the rows that are plain sums.
 const ROW_OF: [(usize, usize); 6] = [
     (idx::VX, out::DVX),
@@ -82,7 +73,7 @@ impl BodyForce {
     }
 }
 
-/// A teacher PINN or PicoPINN loaded from a `picopit-mlp` v2 file.
+/// A teacher PINN or PicoPINN loaded from a `picopit-mlp` v3 file.
 ///
 /// The road adhesion μ is the network's last input and a property of the instance, as it
 /// is of [`dynamics::FourDofTarget`]: it starts at the file's `mu_default` (0.9 for the
@@ -97,6 +88,8 @@ pub struct SurrogateModel {
     mu_range: (f64, f64),
     n_free: usize,
     metadata: BTreeMap<String, String>,
+    /// The file's linear base `o += B z` over all features (`docs/model-format.md`).
+    base: [[f64; N_FEATURES]; N_OUT],
     jz: [[f64; N_IN]; N_OUT],
 }
 
@@ -136,6 +129,7 @@ impl SurrogateModel {
             mu_range: p.mu_range,
             n_free: p.n_free,
             metadata: p.metadata,
+            base: p.base,
             jz: [[0.0; N_IN]; N_OUT],
         })
     }
@@ -235,11 +229,11 @@ impl SurrogateModel {
         ]
     }
 
-    /// The increments `o` (kinematic base included) for the per-step features `z` at the
+    /// The increments `o` (the linear base included) for the per-step features `z` at the
     /// model's μ.
     pub fn forward(&mut self, z: &[f64; N_IN]) -> [f64; N_OUT] {
         let mut o = self.net.forward(z);
-        self.add_base(z, &mut o);
+        self.add_base(z, self.mu, &mut o);
         o
     }
 
@@ -248,15 +242,23 @@ impl SurrogateModel {
     pub fn forward_features(&mut self, z: &[f64; N_FEATURES]) -> [f64; N_OUT] {
         let zs: [f64; N_IN] = std::array::from_fn(|j| z[j]);
         self.net.set_mu(z[MU]);
-        let o = self.forward(&zs);
+        let mut o = self.net.forward(&zs);
+        self.add_base(&zs, z[MU], &mut o);
         self.net.set_mu(self.mu);
         o
     }
 
-    /// `o += dt · (kinematic base of z)`.
-    fn add_base(&self, z: &[f64; N_IN], o: &mut [f64; N_OUT]) {
-        for (k, j) in BASE {
-            o[k] += self.dt * z[j];
+    /// The file's linear base matrix `B` (`o += B z`; rows: outputs, columns: the 11
+    /// features).
+    #[must_use]
+    pub fn base(&self) -> &[[f64; N_FEATURES]; N_OUT] {
+        &self.base
+    }
+
+    /// `o += B [z, μ]`.
+    fn add_base(&self, z: &[f64; N_IN], mu: f64, o: &mut [f64; N_OUT]) {
+        for (ok, bk) in o.iter_mut().zip(&self.base) {
+            *ok += bk[..N_IN].iter().zip(z).map(|(b, z)| b * z).sum::<f64>() + bk[MU] * mu;
         }
     }
 
@@ -302,9 +304,11 @@ impl TargetModel for SurrogateModel {
         let f = BodyForce::new(x[idx::PSI], c);
         let z = Self::features_with(x, u, c, &f);
         let mut o = self.net.forward_jac(&z, &mut self.jz);
-        self.add_base(&z, &mut o);
-        for (k, j) in BASE {
-            self.jz[k][j] += self.dt;
+        self.add_base(&z, self.mu, &mut o);
+        for (jk, bk) in self.jz.iter_mut().zip(&self.base) {
+            for (j, b) in jk.iter_mut().zip(bk) {
+                *j += b;
+            }
         }
         let (px, py) = (c.point_in_body.x, c.point_in_body.y);
 

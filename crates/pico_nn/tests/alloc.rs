@@ -3,12 +3,12 @@
 
 mod common;
 
+use alloc_count::{allocations, CountingAlloc};
 use dynamics::geometry::Vec2;
 use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
 use pico_nn::{JacobianMode, Kernel, SurrogateModel};
 use rand_chacha::rand_core::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use alloc_count::{allocations, CountingAlloc};
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;

@@ -102,7 +102,8 @@ fn missing_metadata_keys_are_named() {
 fn unknown_format_or_version_is_refused() {
     for (key, value) in [
         ("version", "1"),
-        ("version", "3"),
+        ("version", "2"),
+        ("version", "4"),
         ("version", "0"),
         ("version", ""),
         ("format", "onnx"),
@@ -183,7 +184,7 @@ fn layers_inconsistent_with_tensors_are_refused() {
 #[test]
 fn missing_tensors_are_named() {
     let names: Vec<String> = base().tensors.iter().map(|t| t.name.clone()).collect();
-    assert_eq!(names.len(), 3 * 4 + 5);
+    assert_eq!(names.len(), 3 * 4 + 6);
     for name in names {
         let e = refuse(&base().without_tensor(&name), &[&name]);
         assert!(
@@ -199,6 +200,7 @@ fn wrong_dtypes_are_named() {
         ("theta", Dtype::F32, 4),
         ("in_std", Dtype::F32, 4),
         ("out_mean", Dtype::I64, 8),
+        ("base", Dtype::F32, 4),
         ("layer2.weight.idx", Dtype::I64, 8),
         ("layer2.weight.idx", Dtype::U32, 4),
         ("layer1.bias.sign", Dtype::U8, 1),
@@ -223,6 +225,7 @@ fn wrong_shapes_are_named() {
         "in_std",
         "out_mean",
         "out_std",
+        "base",
         "layer1.weight.idx",
         "layer2.weight.sign",
         "layer3.bias.idx",
@@ -263,7 +266,7 @@ fn wrong_shapes_are_named() {
 
 #[test]
 fn non_finite_theta_and_statistics_are_named() {
-    for name in ["theta", "in_mean", "in_std", "out_mean", "out_std"] {
+    for name in ["theta", "in_mean", "in_std", "out_mean", "out_std", "base"] {
         for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
             let mut s = base();
             let t = s.tensor_mut(name);

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{clustered, random_dense, statistics, teacher};
+use common::{base_matrix, clustered, random_dense, statistics, teacher};
 use dynamics::geometry::Vec2;
 use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
 use pico_nn::{JacobianMode, Kernel, SurrogateModel};
@@ -17,10 +17,8 @@ const SHAPES: [&[usize]; 4] = [
     &[11, 64, 64, 64, 8],
 ];
 
-const DT: f64 = 0.05;
-
 /// The map of docs/model-format.md written as plainly as possible: the network on all 11
-/// features, plus the kinematic base dt·[0, 0, 0, 0, p, r, vx, vy].
+/// features, plus the linear base B z (`common::base_matrix`).
 fn reference(dense: &[(Vec<f64>, Vec<f64>)], z: &[f64; 11]) -> [f64; 8] {
     let [im, is, om, os] = statistics();
     let mut h: Vec<f64> = (0..11).map(|j| (z[j] - im[j]) / is[j]).collect();
@@ -36,8 +34,8 @@ fn reference(dense: &[(Vec<f64>, Vec<f64>)], z: &[f64; 11]) -> [f64; 8] {
         }
         h = y;
     }
-    let base = [0.0, 0.0, 0.0, 0.0, z[3], z[2], z[0], z[1]];
-    std::array::from_fn(|k| om[k] + os[k] * h[k] + DT * base[k])
+    let b = base_matrix();
+    std::array::from_fn(|k| om[k] + os[k] * h[k] + (0..11).map(|j| b[k][j] * z[j]).sum::<f64>())
 }
 
 /// The 11 features: the model's 10 per-step ones and μ.

@@ -120,6 +120,9 @@ def _train_parser(sub) -> None:
     p.add_argument("--w-rollout", type=float, default=d.w_rollout, help=f"rollout weight (default {d.w_rollout})")
     p.add_argument("--w-physics", type=float, default=d.w_physics, help=f"physics weight (default {d.w_physics})")
     p.add_argument("--no-physics", action="store_true", help="ablation: physics weight 0")
+    p.add_argument("--base", default=d.base, help=(
+        f"fixed linear base of the increments: impulse (kinematics and the contact's rigid-body "
+        f"impulse) or kinematic (ablation) (default {d.base})"))
     p.add_argument("--horizon", type=int, default=d.horizon, help=f"rollout steps (default {d.horizon})")
     p.add_argument("--seed", type=int, default=d.seed, help=f"random seed (default {d.seed})")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -451,6 +454,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         layers=parse_layers(args.layers), epochs=args.epochs, batch=args.batch, lr=args.lr,
         w_data=args.w_data, w_rollout=args.w_rollout,
         w_physics=0.0 if args.no_physics else args.w_physics, horizon=args.horizon, seed=args.seed,
+        base=args.base,
     ).validate()
     ds = datagen.load(Path(args.data))
     out = Path(args.out)
@@ -461,7 +465,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     v = info["val"]
     print(f"train: {model.param_count} parameters, {cfg.epochs} epochs in {info['seconds']:.0f} s; val one-step "
           f"heading RMSE {v['heading_rmse_rad']:.5f} rad, {cfg.horizon}-step rollout {v['rollout_heading_rmse_rad']:.5f} rad "
-          f"(seed {cfg.seed}, physics weight {cfg.w_physics:g})")
+          f"(seed {cfg.seed}, physics weight {cfg.w_physics:g}, {cfg.base} base)")
     print(f"train: wrote {path}, {out / 'train_curves.png'}, {out / 'checkpoints'}")
     return 0
 

@@ -177,7 +177,7 @@ def compressed_model(student: GatherMLP, clusters: Sequence[TensorClusters], t: 
                            "pruned": int((s == 0).sum()), "threshold_abs": t * c.scale})
     theta = torch.from_numpy(np.concatenate(thetas))
     m = GatherMLP(student.layers, theta, idx, sign, student.in_mean.numpy(), student.in_std.numpy(),
-                  student.out_mean.numpy(), student.out_std.numpy(), student.dt)
+                  student.out_mean.numpy(), student.out_std.numpy(), student.dt, student.base.numpy())
     return m, {"threshold": t, "free": m.param_count, "tensors": per_tensor}
 
 
@@ -228,7 +228,7 @@ def compress(teacher: GatherMLP, ds: Dataset, cfg: CompressConfig, out: Path,
 
     # 1. Distillation on the teacher's outputs (samples and collocation inputs), + norm penalty.
     stats = {k: getattr(teacher, k).numpy() for k in ("in_mean", "in_std", "out_mean", "out_std")}
-    student = dense_mlp(cfg.student, stats, cfg.seed + 1, teacher.dt)
+    student = dense_mlp(cfg.student, stats, cfg.seed + 1, teacher.dt, teacher.base.numpy())
     z_all = torch.cat([tr.z, phys.z])
     with torch.no_grad():
         y_teacher = teacher(z_all)

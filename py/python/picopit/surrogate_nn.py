@@ -1,10 +1,12 @@
 """Learned target surrogates in PyTorch (float64) and their model files.
 
 The network and its file are exactly those of ``docs/model-format.md`` (format
-``picopit-mlp`` version 2): 11 position- and heading-invariant features (the last is the road
+``picopit-mlp`` version 3): 11 position- and heading-invariant features (the last is the road
 adhesion μ, a property of the model instance), a tanh MLP on normalised features, 8
-de-normalised increments added to the explicit-Euler kinematic increments
-``dt·[0, 0, 0, 0, p, r, vx, vy]``, the next state by the stated formulas.
+de-normalised increments added to a fixed linear base ``B z`` stored in the file (the
+training writes the explicit-Euler kinematic increments ``dt·[0, 0, 0, 0, p, r, vx, vy]`` and
+the rigid-body impulse of the step's contact force and moment, :func:`physics_base`), the
+next state by the stated formulas.
 Every layer's weights are a gather ŵ = sign ⊙ θ[idx] from one free-parameter vector θ; the
 teacher PINN is the special case R = identity.
 """
@@ -22,7 +24,7 @@ import numpy as np
 import torch
 
 FORMAT = "picopit-mlp"
-VERSION = "2"
+VERSION = "3"
 FEATURES = ("vx", "vy", "r", "p", "phi", "delta", "T_b", "f_bx", "f_by", "M_z", "mu")
 OUTPUTS = ("dvx", "dvy", "dr", "dp", "dphi", "dpsi", "dx_b", "dy_b")
 N_IN, N_OUT = len(FEATURES), len(OUTPUTS)
@@ -33,6 +35,9 @@ REQUIRED_KEYS = ("format", "version", "kind", "activation", "layers", "features"
 BASE_FEATURE = (-1, -1, -1, -1, 3, 2, 0, 1)
 MU_DEFAULT = 0.9
 KINDS = ("pinn", "picopinn")
+#: The linear bases :func:`physics_base` builds: the kinematics alone, or with the contact's
+#: rigid-body impulse.
+BASES = ("kinematic", "impulse")
 
 
 class ModelFileError(ValueError):
@@ -57,11 +62,39 @@ def features(x: torch.Tensor, u: torch.Tensor, fc: torch.Tensor, gamma: torch.Te
     return torch.stack([x[:, 0], x[:, 1], x[:, 3], x[:, 4], x[:, 5], u[:, 0], u[:, 1], fbx, fby, mz, mu], dim=1)
 
 
-def kinematic_base(z: torch.Tensor, dt: float) -> torch.Tensor:
-    """The explicit-Euler kinematic increments dt·[0, 0, 0, 0, p, r, vx, vy] (B, 8) of
-    features z: the part of the increments the network does not have to learn."""
-    zero = torch.zeros_like(z[:, 0])
-    return torch.stack([dt * z[:, j] if j >= 0 else zero for j in BASE_FEATURE], dim=1)
+def physics_base(dt: float, mass: float, iz: float, kind: str = "impulse") -> np.ndarray:
+    """The fixed linear base B (8 × 11) of the increments, ``o = B z + learned part``: the
+    part of the increments the network does not have to learn.
+
+    ``kinematic``: the explicit-Euler kinematic increments Δφ ← dt·p, Δψ ← dt·r,
+    Δx_b ← dt·vx, Δy_b ← dt·vy. ``impulse`` adds what the step's contact force (f_bx, f_by,
+    in the start body frame) and moment M_z do to a free rigid body of mass ``mass`` and yaw
+    inertia ``iz`` over the step: Δv += dt·f_b/m, Δr += dt·M_z/I_z, Δψ += dt²/2·M_z/I_z,
+    Δ(x_b, y_b) += dt²/2·f_b/m. Tyres, roll and the rotation of the body frame during the
+    step are the network's to learn."""
+    if kind not in BASES:
+        raise ValueError(f"kind = {kind!r}: must be one of {', '.join(BASES)}")
+    for name, v in (("dt", dt), ("mass", mass), ("iz", iz)):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} = {v!r}: must be finite and > 0")
+    b = np.zeros((N_OUT, N_IN))
+    for k, j in enumerate(BASE_FEATURE):
+        if j >= 0:
+            b[k, j] = dt
+    if kind == "impulse":
+        fbx, fby, mz = FEATURES.index("f_bx"), FEATURES.index("f_by"), FEATURES.index("M_z")
+        b[0, fbx] = dt / mass
+        b[1, fby] = dt / mass
+        b[2, mz] = dt / iz
+        b[5, mz] = 0.5 * dt * dt / iz
+        b[6, fbx] = 0.5 * dt * dt / mass
+        b[7, fby] = 0.5 * dt * dt / mass
+    return b
+
+
+def linear_base(z: torch.Tensor, base: torch.Tensor) -> torch.Tensor:
+    """B z (B, 8) for features z (B, 11)."""
+    return z @ base.T
 
 
 def apply_increments(x: torch.Tensor, o: torch.Tensor) -> torch.Tensor:
@@ -99,7 +132,7 @@ class GatherMLP(torch.nn.Module):
     def __init__(self, layers: Sequence[int], theta: torch.Tensor,
                  idx: List[Tuple[torch.Tensor, torch.Tensor]],
                  sign: List[Tuple[torch.Tensor, torch.Tensor]],
-                 in_mean, in_std, out_mean, out_std, dt: float):
+                 in_mean, in_std, out_mean, out_std, dt: float, base):
         super().__init__()
         self.layers = [int(w) for w in layers]
         self.dt = float(dt)
@@ -109,7 +142,8 @@ class GatherMLP(torch.nn.Module):
             self.register_buffer(f"b_idx{l}", bi.to(torch.long))
             self.register_buffer(f"w_sign{l}", ws.to(torch.float64))
             self.register_buffer(f"b_sign{l}", bs.to(torch.float64))
-        for name, v in (("in_mean", in_mean), ("in_std", in_std), ("out_mean", out_mean), ("out_std", out_std)):
+        for name, v in (("in_mean", in_mean), ("in_std", in_std), ("out_mean", out_mean), ("out_std", out_std),
+                        ("base", base)):
             self.register_buffer(name, torch.as_tensor(np.asarray(v), dtype=torch.float64).clone())
 
     @property
@@ -140,9 +174,9 @@ class GatherMLP(torch.nn.Module):
         return self.out_mean + self.out_std * y
 
     def forward(self, z: torch.Tensor) -> torch.Tensor:
-        """Increments o (B, 8) from raw features z (B, 11): the kinematic base plus the
+        """Increments o (B, 8) from raw features z (B, 11): the linear base B z plus the
         learned residual."""
-        return kinematic_base(z, self.dt) + self.residual(z)
+        return linear_base(z, self.base) + self.residual(z)
 
     def step(self, x, u, fc, gamma, point, mu) -> torch.Tensor:
         return apply_increments(x, self(features(x, u, fc, gamma, point, mu)))
@@ -159,13 +193,15 @@ class GatherMLP(torch.nn.Module):
                 key = "w" if part == "weight" else "b"
                 t[f"layer{l}.{part}.idx"] = getattr(self, f"{key}_idx{l}").cpu().numpy().astype(np.int32)
                 t[f"layer{l}.{part}.sign"] = getattr(self, f"{key}_sign{l}").cpu().numpy().astype(np.int8)
-        for name in ("in_mean", "in_std", "out_mean", "out_std"):
-            t[name] = getattr(self, name).cpu().numpy().astype(np.float64)
+        for name in ("in_mean", "in_std", "out_mean", "out_std", "base"):
+            t[name] = np.ascontiguousarray(getattr(self, name).cpu().numpy().astype(np.float64))
         return t
 
 
-def dense_mlp(layers: Sequence[int], stats: Mapping[str, np.ndarray], seed: int, dt: float) -> GatherMLP:
-    """A plain (R = identity) MLP with Xavier-initialised weights and zero biases."""
+def dense_mlp(layers: Sequence[int], stats: Mapping[str, np.ndarray], seed: int, dt: float,
+              base: np.ndarray) -> GatherMLP:
+    """A plain (R = identity) MLP with Xavier-initialised weights and zero biases, over the
+    linear base ``base`` (8 × 11)."""
     g = torch.Generator().manual_seed(int(seed))
     thetas, idx, sign = [], [], []
     off = 0
@@ -181,13 +217,14 @@ def dense_mlp(layers: Sequence[int], stats: Mapping[str, np.ndarray], seed: int,
         idx.append((wi, bi))
         sign.append((torch.ones(n_out, n_in), torch.ones(n_out)))
     return GatherMLP(layers, torch.cat(thetas), idx, sign, stats["in_mean"], stats["in_std"],
-                     stats["out_mean"], stats["out_std"], dt)
+                     stats["out_mean"], stats["out_std"], dt, base)
 
 
 def dense_from_weights(layers: Sequence[int], weights: List[Tuple[torch.Tensor, torch.Tensor]],
                        like: GatherMLP) -> GatherMLP:
     """An identity-R model holding the given expanded weights, with ``like``'s statistics."""
-    m = dense_mlp(layers, {k: getattr(like, k).numpy() for k in ("in_mean", "in_std", "out_mean", "out_std")}, 0, like.dt)
+    m = dense_mlp(layers, {k: getattr(like, k).numpy() for k in ("in_mean", "in_std", "out_mean", "out_std")}, 0, like.dt,
+                  like.base.numpy())
     with torch.no_grad():
         m.theta.copy_(torch.cat([torch.cat([w.reshape(-1), b]) for w, b in weights]))
     return m
@@ -215,7 +252,7 @@ def git_commit(cwd: Optional[Path] = None) -> str:
 def save_model(model: GatherMLP, path: Path, *, kind: str, param_set: str,
                mu_range: Tuple[float, float], provenance: Mapping[str, Any],
                mu_default: Optional[float] = None) -> None:
-    """Write ``model`` as a ``picopit-mlp`` v2 safetensors file with provenance metadata;
+    """Write ``model`` as a ``picopit-mlp`` v3 safetensors file with provenance metadata;
     ``mu_range`` is the road adhesion span of the training data, ``mu_default`` the μ a
     reader uses until told the road's (default :data:`MU_DEFAULT` clamped into the range)."""
     from safetensors.numpy import save_file
@@ -262,7 +299,7 @@ def _validate(t: Mapping[str, np.ndarray], meta: Mapping[str, str], where: str) 
     if meta["kind"] not in KINDS:
         raise bad("kind", f"{meta['kind']!r} is not one of {', '.join(KINDS)}")
     if meta["activation"] != "tanh":
-        raise bad("activation", f"{meta['activation']!r}: only tanh in version 2")
+        raise bad("activation", f"{meta['activation']!r}: only tanh in version 3")
     if meta["features"] != ",".join(FEATURES):
         raise bad("features", f"must be {','.join(FEATURES)}")
     if meta["outputs"] != ",".join(OUTPUTS):
@@ -319,7 +356,9 @@ def _validate(t: Mapping[str, np.ndarray], meta: Mapping[str, str], where: str) 
             raise bad(name, "holds NaN or inf")
         if name.endswith("std") and not np.all(a > 0):
             raise bad(name, "std must be > 0")
-    extra = sorted(set(t) - {"theta", "in_mean", "in_std", "out_mean", "out_std"}
+    if not np.all(np.isfinite(tensor("base", np.float64, (N_OUT, N_IN)))):
+        raise bad("base", "holds NaN or inf")
+    extra = sorted(set(t) - {"theta", "in_mean", "in_std", "out_mean", "out_std", "base"}
                    - {f"layer{l}.{p}.{q}" for l in range(1, len(layers)) for p in ("weight", "bias") for q in ("idx", "sign")})
     if extra:
         raise bad(extra[0], "unexpected tensor")
@@ -361,5 +400,5 @@ def load_model(path: Path) -> Tuple[GatherMLP, Dict[str, str]]:
         sign.append((torch.from_numpy(t[f"layer{l}.weight.sign"].astype(np.float64)),
                      torch.from_numpy(t[f"layer{l}.bias.sign"].astype(np.float64))))
     model = GatherMLP(layers, torch.from_numpy(t["theta"]), idx, sign, t["in_mean"], t["in_std"],
-                      t["out_mean"], t["out_std"], float(meta["dt"]))
+                      t["out_mean"], t["out_std"], float(meta["dt"]), t["base"])
     return model, meta

@@ -36,8 +36,8 @@ import torch
 from . import load_params_dict
 from .datagen import DT, Dataset, DatasetError, windows
 from .physics import FourDof
-from .surrogate_nn import (N_IN, N_OUT, GatherMLP, apply_increments, dense_mlp, features, increments,
-                          kinematic_base)
+from .surrogate_nn import (BASES, N_IN, N_OUT, GatherMLP, apply_increments, dense_mlp, features, increments,
+                          linear_base, physics_base)
 
 #: Which increment std scales each state's error in the rollout loss
 #: (state order vx, vy, ψ, r, p, φ, X, Y → increment order dvx, dvy, dr, dp, dphi, dpsi, dx_b, dy_b).
@@ -67,6 +67,9 @@ class TrainConfig:
     checkpoint_every: int = 10
     loss_scale: str = "geometric"
     """Error scale of the one-step loss per output (``output_scale``)."""
+    base: str = "impulse"
+    """The fixed linear base of the increments (``surrogate_nn.physics_base``): ``impulse``
+    (kinematics and the contact's rigid-body impulse) or ``kinematic`` (the ablation)."""
 
     def validate(self) -> "TrainConfig":
         def bad(name, why):
@@ -90,6 +93,8 @@ class TrainConfig:
             raise bad("seed", "must be a non-negative integer")
         if self.loss_scale not in LOSS_SCALES:
             raise bad("loss_scale", f"must be one of {', '.join(LOSS_SCALES)}")
+        if self.base not in BASES:
+            raise bad("base", f"must be one of {', '.join(BASES)}")
         return self
 
 
@@ -145,9 +150,9 @@ class Split:
         return int(self.x.shape[0])
 
 
-def stats_of(s: Split, dt: float) -> Dict[str, np.ndarray]:
+def stats_of(s: Split, base: np.ndarray) -> Dict[str, np.ndarray]:
     """Feature normalisation, and the normalisation of the learned residual (the increments
-    minus their kinematic base), from the training split (std floored, never 0)."""
+    minus their linear base ``base``), from the training split (std floored, never 0)."""
     def mean_std(a: torch.Tensor):
         m = a.mean(0).numpy()
         sd = a.std(0).numpy()
@@ -155,7 +160,7 @@ def stats_of(s: Split, dt: float) -> Dict[str, np.ndarray]:
         return m, sd
 
     im, isd = mean_std(s.z)
-    om, osd = mean_std(s.o - kinematic_base(s.z, dt))
+    om, osd = mean_std(s.o - linear_base(s.z, torch.from_numpy(base)))
     return {"in_mean": im, "in_std": isd, "out_mean": om, "out_std": osd}
 
 
@@ -406,9 +411,10 @@ def train_teacher(ds: Dataset, cfg: TrainConfig, out: Path, progress: bool = Tru
     t0 = time.time()
     tr, va = prepare(ds, cfg.horizon)
     dt = float(ds.manifest["dt"])
-    stats = stats_of(tr, dt)
-    model = dense_mlp(cfg.layers, stats, cfg.seed, dt)
     model4 = FourDof.from_params(load_params_dict(ds.param_set)["target"], dt=dt)
+    base = physics_base(dt, model4.mass, model4.iz, cfg.base)
+    stats = stats_of(tr, base)
+    model = dense_mlp(cfg.layers, stats, cfg.seed, dt, base)
     phys = physics_targets(tr, model4, cfg.collocation, cfg.seed) if cfg.w_physics > 0 else None
     out = Path(out)
     ckdir = out / "checkpoints"

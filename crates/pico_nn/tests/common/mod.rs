@@ -70,6 +70,27 @@ pub fn statistics() -> [Vec<f64>; 4] {
     ]
 }
 
+/// A linear base `B` (8 × 11, row-major) shaped like the one the training writes: the
+/// kinematic increments dt·[p, r, vx, vy] and the rigid-body impulse of the contact force
+/// and moment (m = 1500 kg, I_z = 2500 kg m²), plus a small μ column so that every kind
+/// of entry is exercised.
+pub fn base_matrix() -> [[f64; 11]; 8] {
+    let (dt, m, iz) = (0.05, 1500.0, 2500.0);
+    let mut b = [[0.0; 11]; 8];
+    b[4][3] = dt; // Δφ ← p
+    b[5][2] = dt; // Δψ ← r
+    b[6][0] = dt; // Δx_b ← vx
+    b[7][1] = dt; // Δy_b ← vy
+    b[0][7] = dt / m; // Δvx ← f_bx
+    b[1][8] = dt / m; // Δvy ← f_by
+    b[2][9] = dt / iz; // Δr ← M_z
+    b[5][9] = 0.5 * dt * dt / iz; // Δψ ← M_z
+    b[6][7] = 0.5 * dt * dt / m; // Δx_b ← f_bx
+    b[7][8] = 0.5 * dt * dt / m; // Δy_b ← f_by
+    b[0][10] = -0.01; // Δvx ← μ
+    b
+}
+
 pub fn metadata(kind: &str, widths: &[usize]) -> HashMap<String, String> {
     let layers = widths
         .iter()
@@ -78,7 +99,7 @@ pub fn metadata(kind: &str, widths: &[usize]) -> HashMap<String, String> {
         .join(",");
     [
         ("format", "picopit-mlp"),
-        ("version", "2"),
+        ("version", "3"),
         ("kind", kind),
         ("activation", "tanh"),
         ("layers", layers.as_str()),
@@ -182,6 +203,8 @@ fn finish(kind: &str, widths: &[usize], theta: Vec<f64>, mut tensors: Vec<Raw>) 
     tensors.push(Raw::f64s("in_std", &[11], &is));
     tensors.push(Raw::f64s("out_mean", &[8], &om));
     tensors.push(Raw::f64s("out_std", &[8], &os));
+    let b: Vec<f64> = base_matrix().iter().flatten().copied().collect();
+    tensors.push(Raw::f64s("base", &[8, 11], &b));
     Spec {
         tensors,
         metadata: metadata(kind, widths),
