@@ -28,13 +28,13 @@ pub enum ModelError {
         reason: String,
     },
     /// `format`/`version` name a file layout this loader does not read.
-    #[error("metadata `{key}` = {value:?}: unsupported; this loader reads format `picopit-mlp` version 2 (regenerate version-1 files with models/regenerate.sh)")]
+    #[error("metadata `{key}` = {value:?}: unsupported; this loader reads format `picopit-mlp` version 3 (regenerate older files with models/regenerate.sh)")]
     Unsupported { key: &'static str, value: String },
     /// A required tensor is absent.
     #[error("tensor `{name}` is missing")]
     MissingTensor { name: String },
     /// A tensor the format does not define (or a layer beyond the `layers` metadata).
-    #[error("tensor `{name}` is not part of format picopit-mlp v2 with layers {layers}")]
+    #[error("tensor `{name}` is not part of format picopit-mlp v3 with layers {layers}")]
     UnexpectedTensor { name: String, layers: String },
     /// A tensor of the wrong element type.
     #[error("tensor `{name}` has dtype {found}, expected {expected}")]

@@ -1,8 +1,9 @@
 //! MLP inference for picopit's learned target surrogates, the teacher PINN and PicoPINN.
 //!
-//! A model file (`docs/model-format.md`, format `picopit-mlp` version 2) is a safetensors
+//! A model file (`docs/model-format.md`, format `picopit-mlp` version 3) is a safetensors
 //! file holding the free parameters θ, the relation R as a gather (`ŵ = sign · θ[idx]` per
-//! weight), the feature and output normalisation, and the architecture in its metadata.
+//! weight), the feature and output normalisation, the fixed linear base `B` of the
+//! increments, and the architecture in its metadata.
 //! [`SurrogateModel`] loads and validates it ([`ModelError`] names the key or tensor at
 //! fault; bad input never panics), expands ŵ once, and implements
 //! [`dynamics::TargetModel`]: the discrete step over the file's `dt` and its exact

@@ -9,7 +9,7 @@ test episodes.
   error at the end.
 
 Every model is given the episode's road μ: the Rust ``FourDofTarget`` at construction, the
-learned models (format version 2, μ is their last feature) through ``SurrogateModel.mu``. The
+learned models (format version 3, μ is their last feature) through ``SurrogateModel.mu``. The
 learned models run through the Rust ``SurrogateModel`` when the extension has it, otherwise
 through the PyTorch implementation of the same file (``backend`` in the results says which).
 Timings: microseconds per single-state ``step`` call from Python (including the binding's
