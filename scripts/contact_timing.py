@@ -101,7 +101,7 @@ def main(argv=None) -> int:
         ap.error("--episodes must be >= 10 and --epochs >= 1")
     try:
         p = load_params_dict(args.params)
-    except Exception as e:  # noqa: BLE001 - the library names the problem
+    except (ValueError, OSError) as e:  # ParamError is a ValueError naming the field
         ap.error(f"--params {args.params!r}: {e}")
     torch.set_num_threads(1)
 

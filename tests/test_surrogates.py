@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -415,3 +416,27 @@ def test_cli_bad_input_exits_2_naming_the_problem(tmp_path, capsys):
     assert "epochs" in capsys.readouterr().err
     assert main(["datagen", "--params", "nope", "--out", str(tmp_path / "d")]) == 2
     assert "params" in capsys.readouterr().err
+
+
+def test_contact_timing_script_reports_every_row(tmp_path, capsys):
+    """scripts/contact_timing.py end to end on a tiny run: the JSON holds every row and the
+    timed oracle beats the trapezoid on contact steps; bad arguments exit 2 naming them."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "contact_timing.py"
+    spec = importlib.util.spec_from_file_location("contact_timing", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out = tmp_path / "ct.json"
+    assert mod.main(["--params", "half_scale", "--episodes", "20", "--seed", "5", "--epochs", "1",
+                     "--json", str(out), "--plot", str(tmp_path / "ct.png")]) == 0
+    r = json.loads(out.read_text())
+    for key in ("oracle_trapezoid", "oracle_timed", "net_features", "net_features_tau"):
+        assert set(r[key]) == {"all_mrad", "contact_mrad", "free_mrad"} and r[key]["all_mrad"] > 0
+    assert r["oracle_timed"]["contact_mrad"] < r["oracle_trapezoid"]["contact_mrad"]
+    assert r["test_contact_samples"] > 0 and (tmp_path / "ct.png").stat().st_size > 0
+    assert "| network on the 11 features |" in capsys.readouterr().out
+    for bad, needle in ((["--params", "quarter_scale"], "--params"), (["--episodes", "3"], "--episodes")):
+        with pytest.raises(SystemExit) as e:
+            mod.main(bad)
+        assert e.value.code == 2 and needle in capsys.readouterr().err
