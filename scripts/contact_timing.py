@@ -38,8 +38,9 @@ import numpy as np
 import torch
 
 from picopit import datagen, load_params_dict
+from picopit.eval_surrogates import wrap_angles
 from picopit.physics import FourDof
-from picopit.surrogate_nn import FEATURES, features, increments
+from picopit.surrogate_nn import features, increments, physics_base
 
 DT = datagen.DT
 PSI = 5  # Δψ in the increment order
@@ -49,18 +50,14 @@ def rmse(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e * e))) if e.size else float("nan")
 
 
-def wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def split_errors(e: np.ndarray, contact: np.ndarray) -> dict:
     """Heading RMSE (mrad) over all samples, contact steps and free steps."""
     return {"all_mrad": 1e3 * rmse(e), "contact_mrad": 1e3 * rmse(e[contact]),
             "free_mrad": 1e3 * rmse(e[~contact])}
 
 
-def fit_heading(inputs: np.ndarray, target: np.ndarray, train: np.ndarray, epochs: int, seed: int,
-                width: int = 64) -> np.ndarray:
+def fit_mlp(inputs: np.ndarray, target: np.ndarray, train: np.ndarray, epochs: int, seed: int,
+            width: int = 64) -> np.ndarray:
     """A tanh MLP (3 hidden layers of ``width``) fitted to ``target`` on the ``train`` rows by
     Adam with cosine decay; returns its predictions on every row."""
     g = torch.Generator().manual_seed(seed)
@@ -114,7 +111,7 @@ def main(argv=None) -> int:
          for k in ("x", "u", "fc", "gamma", "point", "x_next", "mu")}
     z = features(T["x"], T["u"], T["fc"], T["gamma"], T["point"], T["mu"]).numpy()
     o = increments(T["x"], T["x_next"]).numpy()
-    o[:, PSI] = wrap(o[:, PSI])
+    o[:, PSI] = wrap_angles(o[:, PSI])
     r, r_next = a["x"][:, 3], a["x_next"][:, 3]
     contact = a["fc"][:, 0] > 0
     tau = a["tau"]
@@ -134,8 +131,7 @@ def main(argv=None) -> int:
     }
 
     # Networks for Δψ − r·dt − M_z·dt²/(2 I_z) (the impulse base's heading part).
-    base = DT * z[:, FEATURES.index("r")] + 0.5 * DT * DT * z[:, FEATURES.index("M_z")] / m4.iz
-    target = dpsi - base
+    target = dpsi - z @ physics_base(DT, m4.mass, m4.iz)[PSI]
     tau_in = np.where(contact, tau, 0.5)[:, None]
     inputs = {
         "net_features": z,
@@ -144,14 +140,14 @@ def main(argv=None) -> int:
     preds = {}
     for i, (name, x) in enumerate(inputs.items()):
         t1 = time.time()
-        preds[name] = fit_heading(x, target, train, args.epochs, args.seed + i)
+        preds[name] = fit_mlp(x, target, train, args.epochs, args.seed + i)
         e = (target - preds[name])[test]
         results[name] = split_errors(e, c_test)
         print(f"contact_timing: {name}: {results[name]['all_mrad']:.3f} mrad ({time.time() - t1:.0f} s)",
               file=sys.stderr)
     # Is τ predictable from the features? (contact steps only)
     ct = np.flatnonzero(contact)
-    tau_hat = fit_heading(z[ct], tau[ct], train[ct], args.epochs, args.seed + len(inputs))
+    tau_hat = fit_mlp(z[ct], tau[ct], train[ct], args.epochs, args.seed + len(inputs))
     tt = test[ct]
     results["tau_r2_from_features"] = float(1.0 - np.mean((tau[ct][tt] - tau_hat[tt]) ** 2) / np.var(tau[ct][tt]))
     results["seconds"] = {"datagen": t_gen, "total": time.time() - t0}

@@ -35,7 +35,8 @@ from .train import torch_threads
 MODELS = ("4dof", "pinn", "picopinn")
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
+def wrap_angles(a: np.ndarray) -> np.ndarray:
+    """Angles (any shape) wrapped to [−π, π]."""
     return np.arctan2(np.sin(a), np.cos(a))
 
 
@@ -43,7 +44,7 @@ def _errors(pred: np.ndarray, true: np.ndarray) -> Dict[str, float]:
     e = pred - true
     rms = lambda v: float(np.sqrt(np.mean(v ** 2))) if v.size else float("nan")  # noqa: E731
     return {
-        "heading_rmse_rad": rms(_wrap(e[..., 2])),
+        "heading_rmse_rad": rms(wrap_angles(e[..., 2])),
         "yaw_rate_rmse_radps": rms(e[..., 3]),
         "roll_rmse_rad": rms(e[..., 5]),
         "position_rmse_m": rms(np.hypot(e[..., 6], e[..., 7])),
@@ -138,7 +139,7 @@ def evaluate_model(m: _Batched, a: Mapping[str, np.ndarray], horizon: int, strid
     seconds = time.perf_counter() - t0
     roll = _errors(errs, np.zeros_like(errs))
     end = _errors(errs[-1], np.zeros_like(errs[-1]))
-    per_step_heading = np.sqrt(np.mean(_wrap(errs[..., 2]) ** 2, axis=1))
+    per_step_heading = np.sqrt(np.mean(wrap_angles(errs[..., 2]) ** 2, axis=1))
     res: Dict[str, Any] = {"params": m.params, "backend": m.backend}
     res.update(one)
     res["contact_heading_rmse_rad"] = one_contact["heading_rmse_rad"]
