@@ -414,6 +414,9 @@ def test_cli_bad_input_exits_2_naming_the_problem(tmp_path, capsys):
     assert "layers" in capsys.readouterr().err
     assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--epochs", "0"]) == 2
     assert "epochs" in capsys.readouterr().err
+    assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--base", "affine"]) == 2
+    err = capsys.readouterr().err
+    assert "base" in err and "impulse" in err
     assert main(["datagen", "--params", "nope", "--out", str(tmp_path / "d")]) == 2
     assert "params" in capsys.readouterr().err
 
