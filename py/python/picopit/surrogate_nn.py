@@ -236,11 +236,15 @@ def dense_from_weights(layers: Sequence[int], weights: List[Tuple[torch.Tensor, 
 
 
 def git_commit(cwd: Optional[Path] = None) -> str:
+    """HEAD, with ``-dirty`` when a tracked file outside ``models/`` has changed: the shipped
+    model files are what ``models/regenerate.sh`` writes, so the first set's new file must
+    not mark the second set's provenance dirty."""
     try:
         out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
                              cwd=cwd or Path(__file__).parent, timeout=10)
         if out.returncode == 0:
-            dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+            dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
+                                    ":(top)", ":(top,exclude)models"],
                                    capture_output=True, text=True, cwd=cwd or Path(__file__).parent,
                                    timeout=10).stdout.strip()
             return out.stdout.strip() + ("-dirty" if dirty else "")
