@@ -252,6 +252,37 @@ def _corrupt(tmp_path, edit):
     return bad
 
 
+def test_provenance_commit_is_dirty_for_code_changes_not_for_model_files(tmp_path):
+    import shutil
+    import subprocess
+
+    from picopit.surrogate_nn import git_commit
+
+    if shutil.which("git") is None:
+        pytest.skip("git not installed")
+
+    def git(*args):
+        subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path,
+                       check=True, capture_output=True)
+
+    (tmp_path / "models").mkdir()
+    (tmp_path / "code.py").write_text("a = 1\n")
+    (tmp_path / "models" / "m.safetensors").write_bytes(b"old")
+    git("init", "-q")
+    git("add", ".")
+    git("commit", "-qm", "init")
+    head = git_commit(tmp_path)
+    assert len(head) == 40 and not head.endswith("-dirty")
+    # regenerate.sh writes the first set's model before the second set records its commit
+    (tmp_path / "models" / "m.safetensors").write_bytes(b"new")
+    assert git_commit(tmp_path) == head
+    (tmp_path / "code.py").write_text("a = 2\n")
+    assert git_commit(tmp_path) == head + "-dirty"
+    # from a subfolder (the package's own folder) the whole tree still counts
+    (tmp_path / "models" / "sub").mkdir()
+    assert git_commit(tmp_path / "models" / "sub") == head + "-dirty"
+
+
 @pytest.mark.parametrize("edit, name", [
     (lambda t, m: t.pop("in_std"), "in_std"),
     (lambda t, m: t.__setitem__("theta", np.where(np.arange(t["theta"].size) == 3, np.nan, t["theta"])), "theta"),
