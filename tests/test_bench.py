@@ -73,6 +73,13 @@ def test_bench_writes_the_tables_json_episodes_and_figures(bench_run):
     md = (run / "summary.md").read_text()
     assert "| config | episodes | success % | at rest % | straight % | curved %" in md
     assert "Failure causes" in md
+    # Paired comparison: every pair once, its counts agree with the per-configuration successes.
+    assert "Paired comparison" in md
+    assert len(doc["paired"]) == len(PRESETS) * (len(PRESETS) - 1) // 2
+    for p in doc["paired"].values():
+        assert p["scenes"] == 3 and 0.0 <= p["mcnemar_p"] <= 1.0
+        assert p["only_a"] + p["both"] == doc["configs"][p["a"]]["successes"]
+        assert p["only_b"] + p["both"] == doc["configs"][p["b"]]["successes"]
     with open(run / "summary.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["config"] for r in rows] == PRESETS
@@ -227,3 +234,20 @@ def test_ray_runs_the_same_episodes_as_local_processes():
     key = lambda rows: [(r["config"], r["index"], r["success"], r["cause"], r["contacts"]) for r in rows]  # noqa: E731
     assert key(remote.rows) == key(local.rows)
     assert remote.summary["4dof"]["episodes"] == 2
+
+
+def test_the_exact_mcnemar_test_and_the_paired_counts():
+    from picopit.bench import mcnemar_exact_p, paired
+
+    assert mcnemar_exact_p(0, 0) == 1.0 and mcnemar_exact_p(3, 3) == 1.0
+    assert mcnemar_exact_p(0, 5) == pytest.approx(2 / 32)           # 2 · 0.5^5
+    assert mcnemar_exact_p(1, 9) == pytest.approx(2 * 11 / 1024)     # 2 · (1 + 10) / 2^10
+    assert mcnemar_exact_p(9, 1) == mcnemar_exact_p(1, 9)
+    assert mcnemar_exact_p(100, 74) == pytest.approx(0.0577, abs=5e-4)  # full run, 4-DOF vs PINN
+    rows = [{"config": c, "index": i, "success": s} for c, i, s in (
+        ("x", 0, True), ("x", 1, True), ("x", 2, False), ("x", 3, True),
+        ("y", 0, True), ("y", 1, False), ("y", 2, True), ("y", 4, True))]
+    (p,) = paired(rows, ("x", "y")).values()
+    # scene 3 only x ran, scene 4 only y: neither counts
+    assert (p["scenes"], p["only_a"], p["only_b"], p["both"]) == (3, 1, 1, 1)
+    assert p["mcnemar_p"] == 1.0

@@ -256,6 +256,7 @@ def test_provenance_commit_is_dirty_for_code_changes_not_for_model_files(tmp_pat
     import shutil
     import subprocess
 
+    from picopit.provenance import git_commit as tree_commit
     from picopit.surrogate_nn import git_commit
 
     if shutil.which("git") is None:
@@ -276,6 +277,8 @@ def test_provenance_commit_is_dirty_for_code_changes_not_for_model_files(tmp_pat
     # regenerate.sh writes the first set's model before the second set records its commit
     (tmp_path / "models" / "m.safetensors").write_bytes(b"new")
     assert git_commit(tmp_path) == head
+    # ... while the benchmark's provenance counts the models it ran with
+    assert tree_commit(tmp_path) == head + "-dirty"
     (tmp_path / "code.py").write_text("a = 2\n")
     assert git_commit(tmp_path) == head + "-dirty"
     # from a subfolder (the package's own folder) the whole tree still counts

@@ -36,7 +36,7 @@ from typing import Any, Dict, Iterable, Iterator, List, Mapping, Optional, Seque
 
 import numpy as np
 
-from . import _core
+from . import _core, provenance
 
 SUBSET_SIZE = 128
 CATEGORIES = ("straight_urban", "straight_highway", "curved")
@@ -324,6 +324,33 @@ def summarise(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str,
     return out
 
 
+def mcnemar_exact_p(only_a: int, only_b: int) -> float:
+    """Two-sided exact McNemar test: the probability, if both configurations succeed equally
+    often, of a split of the discordant scenes at least as uneven (binomial, p = 1/2)."""
+    n, k = only_a + only_b, min(only_a, only_b)
+    if n == 0:
+        return 1.0
+    return min(1.0, 2 * sum(math.comb(n, j) for j in range(k + 1)) / 2 ** n)
+
+
+def paired(rows: Sequence[Mapping[str, Any]], configs: Sequence[str]) -> Dict[str, Dict[str, Any]]:
+    """Every pair of configurations on the scenes both ran (same scenes, same seeds): the
+    scenes only the first saved, only the second, both, and the exact McNemar p-value of the
+    difference. A difference in success rate with p above ~0.05 is within what the scenes'
+    luck makes of two equal controllers."""
+    won = {(r["config"], r["index"]): bool(r["success"]) for r in rows}
+    out: Dict[str, Dict[str, Any]] = {}
+    for i, a in enumerate(configs):
+        for b in configs[i + 1:]:
+            scenes = sorted({k for c, k in won if c == a} & {k for c, k in won if c == b})
+            only_a = sum(won[(a, k)] and not won[(b, k)] for k in scenes)
+            only_b = sum(won[(b, k)] and not won[(a, k)] for k in scenes)
+            both = sum(won[(a, k)] and won[(b, k)] for k in scenes)
+            out[f"{a} vs {b}"] = {"a": a, "b": b, "scenes": len(scenes), "only_a": only_a, "only_b": only_b,
+                                  "both": both, "mcnemar_p": mcnemar_exact_p(only_a, only_b)}
+    return out
+
+
 def _fmt(v: Any, digits: int = 1) -> str:
     if v is None:
         return "–"
@@ -359,7 +386,8 @@ CAUSE_COLUMNS: Tuple[Tuple[str, str, int], ...] = tuple(
 )
 
 
-def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "") -> str:
+def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
+             pairs: Optional[Mapping[str, Mapping[str, Any]]] = None) -> str:
     lines = [header] if header else []
 
     def table(cols: Sequence[Tuple[str, str, int]]) -> None:
@@ -373,6 +401,16 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "") -> str:
     lines.append("Failure causes (first cause, % of the configuration's episodes):")
     lines.append("")
     table(CAUSE_COLUMNS)
+    if pairs:
+        lines.append("Paired comparison (the same scenes and seeds; exact McNemar test on the scenes "
+                     "only one of the two saved):")
+        lines.append("")
+        lines.append("| A | B | scenes | A only | B only | both | p |")
+        lines.append("|---|---|---|---|---|---|---|")
+        for p in pairs.values():
+            lines.append(f"| {p['a']} | {p['b']} | {p['scenes']} | {p['only_a']} | {p['only_b']} | {p['both']} "
+                         f"| {p['mcnemar_p']:.3g} |")
+        lines.append("")
     return "\n".join(lines)
 
 
@@ -770,19 +808,9 @@ def run(cfg: BenchConfig, progress: bool = True) -> BenchResult:
 
 
 def git_commit() -> str:
-    """HEAD of the source tree (``-dirty`` with uncommitted changes), or ``unknown``."""
-    import subprocess
-
-    here = Path(__file__).parent
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, cwd=here, timeout=10)
-        if out.returncode == 0:
-            dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
-                                   text=True, cwd=here, timeout=10).stdout.strip()
-            return out.stdout.strip() + ("-dirty" if dirty else "")
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return "unknown"
+    """HEAD of the source tree (``-dirty`` with uncommitted changes, the models included),
+    or ``unknown``."""
+    return provenance.git_commit()
 
 
 def machine() -> str:
@@ -884,14 +912,15 @@ def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[
     header = (f"# picopit bench\n\n`{info.get('command', 'picopit bench')}` — {info.get('created', '')}, "
               f"{len(res.scenes)} scenes ({info['scene_set']}) × {len(cfg.configs)} configurations, "
               f"seed {cfg.seed}, {res.seconds:.0f} s on {cfg.n_workers()} workers ({info['machine']}).\n")
-    md = markdown(res.summary, header)
+    pairs = paired(res.rows, cfg.configs)
+    md = markdown(res.summary, header, pairs)
     if res.notes:
         md += "\nNotes:\n\n" + "\n".join(f"- {n}" for n in res.notes) + "\n"
     paths["md"] = out / "summary.md"
     paths["md"].write_text(md)
     paths["csv"] = out / "summary.csv"
     write_csv(res.summary, paths["csv"])
-    doc = {"configs": res.summary, "run": info}
+    doc = {"configs": res.summary, "paired": pairs, "run": info}
     paths["json"] = out / "summary.json"
     paths["json"].write_text(json.dumps(doc, indent=2) + "\n")
     table = episode_table(res.rows, res.meta)
@@ -921,7 +950,7 @@ def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[
                 paths["mcap"] = mcap_path
     if res.notes:
         # Notes found while writing go into the Markdown and JSON too.
-        md = markdown(res.summary, header) + "\nNotes:\n\n" + "\n".join(f"- {n}" for n in res.notes) + "\n"
+        md = markdown(res.summary, header, pairs) + "\nNotes:\n\n" + "\n".join(f"- {n}" for n in res.notes) + "\n"
         paths["md"].write_text(md)
         info["notes"] = res.notes
         paths["json"].write_text(json.dumps(doc, indent=2) + "\n")

@@ -16,12 +16,13 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
-import subprocess
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
+
+from . import provenance
 
 FORMAT = "picopit-mlp"
 VERSION = "3"
@@ -239,18 +240,7 @@ def git_commit(cwd: Optional[Path] = None) -> str:
     """HEAD, with ``-dirty`` when a tracked file outside ``models/`` has changed: the shipped
     model files are what ``models/regenerate.sh`` writes, so the first set's new file must
     not mark the second set's provenance dirty."""
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                             cwd=cwd or Path(__file__).parent, timeout=10)
-        if out.returncode == 0:
-            dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
-                                    ":(top)", ":(top,exclude)models"],
-                                   capture_output=True, text=True, cwd=cwd or Path(__file__).parent,
-                                   timeout=10).stdout.strip()
-            return out.stdout.strip() + ("-dirty" if dirty else "")
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return "unknown"
+    return provenance.git_commit(cwd, ignore=("models",))
 
 
 def save_model(model: GatherMLP, path: Path, *, kind: str, param_set: str,
