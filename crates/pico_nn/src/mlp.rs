@@ -29,7 +29,9 @@ pub enum Kernel {
 }
 
 impl Kernel {
-    /// The fastest kernel this CPU runs (AVX-512, else AVX2, else portable).
+    /// The widest kernel this CPU runs (AVX-512, else AVX2, else portable). A loaded net
+    /// starts on the faster of the two FMA kernels for its widths, timed at load, when the
+    /// CPU has both; this is the choice where it has one or none.
     #[must_use]
     pub fn detect() -> Self {
         [Self::Avx512, Self::Avx2Fma]
@@ -129,6 +131,9 @@ struct Scratch {
     gb: Vec<f64>,
 }
 
+/// `forward_jac` calls per kernel and round when the FMA kernel is chosen at load.
+const CALIBRATION_CALLS: usize = 32;
+
 /// A loaded tanh MLP with its scratch memory.
 #[derive(Debug, Clone)]
 pub struct Mlp {
@@ -203,7 +208,37 @@ impl Mlp {
             mode: JacobianMode::Reverse,
         };
         mlp.set_mu(p.mu_default);
+        mlp.kernel = mlp.faster_fma_kernel();
         mlp
+    }
+
+    /// On a CPU with both FMA kernels, the faster of the two for this net, timed once at
+    /// load: the least time of 5 rounds of [`CALIBRATION_CALLS`] `forward_jac` calls per
+    /// kernel (about 1 ms for a teacher-sized net). Which one wins depends on the CPU and the
+    /// widths (docs/pico_nn.md: on an AMD EPYC VM AVX2 was faster for every student width,
+    /// AVX-512 for the teacher's). The two give bit-identical results, so the choice changes
+    /// the time only, never a number. Elsewhere: [`Kernel::detect`].
+    fn faster_fma_kernel(&mut self) -> Kernel {
+        if !(Kernel::Avx2Fma.available() && Kernel::Avx512.available()) {
+            return Kernel::detect();
+        }
+        let z = self.w.in_mean;
+        let mut jz = [[0.0; N_IN]; N_OUT];
+        let mut best = (std::time::Duration::MAX, Kernel::Avx512);
+        for _ in 0..5 {
+            for kernel in [Kernel::Avx512, Kernel::Avx2Fma] {
+                self.kernel = kernel;
+                let start = std::time::Instant::now();
+                for _ in 0..CALIBRATION_CALLS {
+                    std::hint::black_box(self.forward_jac(std::hint::black_box(&z), &mut jz));
+                }
+                let t = start.elapsed();
+                if t < best.0 {
+                    best = (t, kernel);
+                }
+            }
+        }
+        best.1
     }
 
     /// Fix the μ input (the last feature) at `mu`: the first layer's bias becomes

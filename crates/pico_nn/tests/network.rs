@@ -323,6 +323,38 @@ fn fma_kernels_agree_bit_for_bit() {
     }
 }
 
+/// A loaded net starts on an FMA kernel when the CPU has one: with both, on whichever was
+/// faster for its widths at load, and then its numbers are those of either (the choice is
+/// timed, so the test pins nothing about which).
+#[test]
+fn a_loaded_net_starts_on_an_fma_kernel_with_the_same_numbers() {
+    let both = Kernel::Avx2Fma.available() && Kernel::Avx512.available();
+    let mut rng = ChaCha8Rng::seed_from_u64(19);
+    for widths in SHAPES {
+        let bytes = teacher("pinn", widths, &random_dense(widths, &mut rng)).to_bytes();
+        let mut m = SurrogateModel::from_bytes(&bytes).unwrap();
+        let kernel = m.network().kernel();
+        if both {
+            assert!(
+                matches!(kernel, Kernel::Avx2Fma | Kernel::Avx512),
+                "{kernel:?}"
+            );
+        } else {
+            assert_eq!(kernel, Kernel::detect());
+        }
+        let mut pinned = load(&bytes, Kernel::detect(), JacobianMode::Reverse);
+        let (mut ja, mut jb) = (TargetJacobians::default(), TargetJacobians::default());
+        for _ in 0..20 {
+            let (x, u, c) = random_case(&mut rng);
+            assert_eq!(
+                m.step_jac(&x, &u, &c, &mut ja),
+                pinned.step_jac(&x, &u, &c, &mut jb)
+            );
+            assert_eq!(ja, jb, "{widths:?}");
+        }
+    }
+}
+
 /// μ changes the prediction, is refused outside the trained range (the model keeps its
 /// previous μ), and `with_mu` equals `set_mu`.
 #[test]
