@@ -3,7 +3,8 @@
 # the teacher PINN, PicoPINN and the evaluation. Intermediate outputs (data, checkpoints,
 # curves) go to runs/surrogates/<set>; the model files, the evaluation JSON/Markdown and the
 # small figures are copied into models/<set>. Seeds are fixed: the same tree gives the same
-# files (PyTorch CPU, PICOPIT_THREADS threads). Usage: models/regenerate.sh [full_size] [half_scale]
+# files up to float rounding (PyTorch CPU, PICOPIT_THREADS threads; a re-run differed by at most
+# 4e-13 in theta, every evaluation figure the same). Usage: models/regenerate.sh [full_size] [half_scale]
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 SEED="${SEED:-0}"
