@@ -296,6 +296,26 @@ fn clustered_and_teacher_layouts_are_identical() {
     }
 }
 
+/// `a` and `b` give the same step and Jacobians, bit for bit, on `n` random cases.
+fn assert_same_bits(
+    a: &mut SurrogateModel,
+    b: &mut SurrogateModel,
+    rng: &mut ChaCha8Rng,
+    n: usize,
+    what: &str,
+) {
+    let (mut ja, mut jb) = (TargetJacobians::default(), TargetJacobians::default());
+    for _ in 0..n {
+        let (x, u, c) = random_case(rng);
+        assert_eq!(
+            a.step_jac(&x, &u, &c, &mut ja),
+            b.step_jac(&x, &u, &c, &mut jb),
+            "{what}"
+        );
+        assert_eq!(ja, jb, "{what}");
+    }
+}
+
 /// The two FMA kernels accumulate every element in the same order: bit-identical results
 /// (when this CPU has both).
 #[test]
@@ -310,15 +330,13 @@ fn fma_kernels_agree_bit_for_bit() {
         for mode in [JacobianMode::Reverse, JacobianMode::Forward] {
             let mut a = load(&bytes, Kernel::Avx2Fma, mode);
             let mut b = load(&bytes, Kernel::Avx512, mode);
-            let (mut ja, mut jb) = (TargetJacobians::default(), TargetJacobians::default());
-            for _ in 0..50 {
-                let (x, u, c) = random_case(&mut rng);
-                assert_eq!(
-                    a.step_jac(&x, &u, &c, &mut ja),
-                    b.step_jac(&x, &u, &c, &mut jb)
-                );
-                assert_eq!(ja, jb, "{widths:?} {mode:?}");
-            }
+            assert_same_bits(
+                &mut a,
+                &mut b,
+                &mut rng,
+                50,
+                &format!("{widths:?} {mode:?}"),
+            );
         }
     }
 }
@@ -343,15 +361,7 @@ fn a_loaded_net_starts_on_an_fma_kernel_with_the_same_numbers() {
             assert_eq!(kernel, Kernel::detect());
         }
         let mut pinned = load(&bytes, Kernel::detect(), JacobianMode::Reverse);
-        let (mut ja, mut jb) = (TargetJacobians::default(), TargetJacobians::default());
-        for _ in 0..20 {
-            let (x, u, c) = random_case(&mut rng);
-            assert_eq!(
-                m.step_jac(&x, &u, &c, &mut ja),
-                pinned.step_jac(&x, &u, &c, &mut jb)
-            );
-            assert_eq!(ja, jb, "{widths:?}");
-        }
+        assert_same_bits(&mut m, &mut pinned, &mut rng, 20, &format!("{widths:?}"));
     }
 }
 

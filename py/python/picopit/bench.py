@@ -339,10 +339,11 @@ def paired(rows: Sequence[Mapping[str, Any]], configs: Sequence[str]) -> Dict[st
     difference. A difference in success rate with p above ~0.05 is within what the scenes'
     luck makes of two equal controllers."""
     won = {(r["config"], r["index"]): bool(r["success"]) for r in rows}
+    ran = {c: {k for cc, k in won if cc == c} for c in configs}
     out: Dict[str, Dict[str, Any]] = {}
     for i, a in enumerate(configs):
         for b in configs[i + 1:]:
-            scenes = sorted({k for c, k in won if c == a} & {k for c, k in won if c == b})
+            scenes = ran[a] & ran[b]
             only_a = sum(won[(a, k)] and not won[(b, k)] for k in scenes)
             only_b = sum(won[(b, k)] and not won[(a, k)] for k in scenes)
             both = sum(won[(a, k)] and won[(b, k)] for k in scenes)
@@ -758,6 +759,8 @@ class BenchResult:
     seconds: float
     notes: List[str] = field(default_factory=list)
     cases: Dict[str, Optional[Dict[str, Any]]] = field(default_factory=dict)
+    pairs: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+    """``paired(rows, configs)``."""
 
 
 def load_scenes(cfg: BenchConfig) -> Tuple[List[Dict[str, Any]], List[int]]:
@@ -783,7 +786,7 @@ def run(cfg: BenchConfig, progress: bool = True) -> BenchResult:
              for c in cfg.configs for i in scenes]
     rows = run_all(tasks, cfg, progress=progress)
     res = BenchResult(summary=summarise(rows, meta, cfg.configs), rows=rows, meta=meta, scenes=scenes,
-                      seconds=0.0)
+                      seconds=0.0, pairs=paired(rows, cfg.configs))
     errors = [r for r in rows if r.get("error")]
     if errors:
         res.notes.append(f"{len(errors)} episodes could not be run (cause 'error'); first: "
@@ -912,15 +915,14 @@ def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[
     header = (f"# picopit bench\n\n`{info.get('command', 'picopit bench')}` — {info.get('created', '')}, "
               f"{len(res.scenes)} scenes ({info['scene_set']}) × {len(cfg.configs)} configurations, "
               f"seed {cfg.seed}, {res.seconds:.0f} s on {cfg.n_workers()} workers ({info['machine']}).\n")
-    pairs = paired(res.rows, cfg.configs)
-    md = markdown(res.summary, header, pairs)
+    md = markdown(res.summary, header, res.pairs)
     if res.notes:
         md += "\nNotes:\n\n" + "\n".join(f"- {n}" for n in res.notes) + "\n"
     paths["md"] = out / "summary.md"
     paths["md"].write_text(md)
     paths["csv"] = out / "summary.csv"
     write_csv(res.summary, paths["csv"])
-    doc = {"configs": res.summary, "paired": pairs, "run": info}
+    doc = {"configs": res.summary, "paired": res.pairs, "run": info}
     paths["json"] = out / "summary.json"
     paths["json"].write_text(json.dumps(doc, indent=2) + "\n")
     table = episode_table(res.rows, res.meta)
@@ -950,7 +952,7 @@ def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[
                 paths["mcap"] = mcap_path
     if res.notes:
         # Notes found while writing go into the Markdown and JSON too.
-        md = markdown(res.summary, header, pairs) + "\nNotes:\n\n" + "\n".join(f"- {n}" for n in res.notes) + "\n"
+        md = markdown(res.summary, header, res.pairs) + "\nNotes:\n\n" + "\n".join(f"- {n}" for n in res.notes) + "\n"
         paths["md"].write_text(md)
         info["notes"] = res.notes
         paths["json"].write_text(json.dumps(doc, indent=2) + "\n")

@@ -587,7 +587,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     paths = bench.write_outputs(res, cfg, out, extra)
     if args.json:
         bench.write_json(paths["json"], Path(args.json))
-    print(bench.markdown(res.summary, pairs=bench.paired(res.rows, cfg.configs)), end="")
+    print(bench.markdown(res.summary, pairs=res.pairs), end="")
     for n in res.notes:
         print(f"bench: note: {n}")
     print(f"bench: {len(res.scenes)} scenes x {len(cfg.configs)} configurations in {res.seconds:.0f} s "

@@ -37,7 +37,7 @@ from .train import (LOSS_SCALES, Split, TrainError, evaluate, fit, physics_targe
 class CompressConfig:
     student: Tuple[int, ...] = (11, 40, 40, 8)
     """2448 weights and biases before clustering to the budget. The 11-32-32-8 student shipped
-    before had 9–12 % more 2 s rollout heading error at the same budget; 40 wide costs ~1.5×
+    before had 9–13 % more 2 s rollout heading error at the same budget; 40 wide costs 1.33×
     in ``step_jac``, still within 2 µs (docs/surrogates.md, docs/BENCHMARKS.md)."""
     budget: int = 812
     distil_epochs: int = 60
