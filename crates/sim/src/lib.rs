@@ -22,7 +22,9 @@ pub mod vehicle;
 pub use episode::{
     run_episode, ClockKind, EpisodeConfig, EpisodeError, EpisodeResult, ModelKind, Uncertainty,
 };
-pub use oracle::{ideal_pit, OracleReport, OracleSettings};
+pub use oracle::{
+    ideal_pit, shove_grid, DriverView, GridChoice, OracleReport, OracleSettings, ShoveGrid,
+};
 pub use outcome::{FailureCause, JudgeSettings, Metrics, Monitor, Observation, Outcome, Status};
 pub use scenario::{load_jsonl, parse_jsonl, Scenario, ScenarioError, TargetDriver};
 pub use screen::{screen, ScreenReport, ScreenSettings, Verdict};

@@ -144,6 +144,8 @@ struct Alone {
     monitor: Monitor,
     road: dynamics::road::Road,
     first_contact: Option<f64>,
+    /// A command held instead of the driver's law ([`DriverView::Held`]).
+    held: Option<(f64, f64)>,
     steps_per: usize,
     k: usize,
 }
@@ -156,7 +158,10 @@ impl Alone {
     fn period(&mut self) -> Status {
         let t = self.k as f64 * DT;
         let x = self.plant.target_state();
-        let (steer, brake) = self.driver.command(t, self.first_contact, &x, &self.road);
+        let (steer, brake) = match self.held {
+            Some(command) => command,
+            None => self.driver.command(t, self.first_contact, &x, &self.road),
+        };
         self.plant.set_target_command(steer, brake);
         let mut touched = false;
         for _ in 0..self.steps_per {
@@ -192,80 +197,132 @@ impl Alone {
     }
 }
 
+/// The target alone up to `T_max` (or its own failure): a snapshot at every candidate time
+/// (`settings.time_step`) and the bullet's reach bound.
+struct Snapshots {
+    snaps: Vec<Alone>,
+    t_reach: f64,
+    alone_fails_at: Option<f64>,
+    params: dynamics::params::ParamSet,
+}
+
+impl Snapshots {
+    fn new(sc: &Scenario, settings: &OracleSettings) -> Result<Self, ScenarioError> {
+        settings.validate()?;
+        let params = sc.params.load()?;
+        let road = sc.build_road()?;
+        let plant = target_alone(sc, &params, &road)?;
+        let steps_per = (DT / plant.dt()).round().max(1.0) as usize;
+        let mut base = Alone {
+            plant,
+            driver: sc.target_driver(&params),
+            monitor: Monitor::for_scenario(sc)?,
+            road: road.clone(),
+            first_contact: None,
+            held: None,
+            steps_per,
+            k: 0,
+        };
+        let n = (sc.t_max / DT).ceil() as usize;
+        let every = ((settings.time_step / DT).round() as usize).max(1);
+        let mut stations = vec![sc.target.s];
+        let mut snaps = vec![base.clone()];
+        let mut s_hint = sc.target.s;
+        let mut alone_fails_at = None;
+        for _ in 0..n {
+            let status = base.period();
+            let x = base.plant.target_state();
+            let f = road.project_with_hint(Vec2::new(x[6], x[7]), s_hint);
+            s_hint = f.s;
+            stations.push(f.s);
+            if let Status::Done(o) = status {
+                if let Outcome::Failure {
+                    cause: FailureCause::BoundaryViolation | FailureCause::SecondaryCollision,
+                    time,
+                } = o
+                {
+                    alone_fails_at = Some(time);
+                }
+                break;
+            }
+            if base.k % every == 0 {
+                snaps.push(base.clone());
+            }
+        }
+        let t_reach = reach_time(sc, &params, &stations, DT, &settings.screen);
+        Ok(Self {
+            snaps,
+            t_reach,
+            alone_fails_at,
+            params,
+        })
+    }
+
+    /// The snapshots at which a shove is a candidate: from the reach bound to
+    /// `T_max − min_remaining`, inside `settings.window`, the target not yet judged.
+    fn candidates<'a>(
+        &'a self,
+        sc: &Scenario,
+        settings: &'a OracleSettings,
+    ) -> impl Iterator<Item = &'a Alone> + 'a {
+        let t_last = sc.t_max - settings.min_remaining;
+        let t_reach = self.t_reach;
+        self.snaps.iter().filter(move |snap| {
+            let t = snap.time();
+            let in_window = settings
+                .window
+                .is_none_or(|[from, to]| t + 1e-9 >= from && t <= to + 1e-9);
+            t + 1e-9 >= t_reach
+                && t <= t_last + 1e-9
+                && snap.monitor.outcome().is_none()
+                && in_window
+        })
+    }
+
+    /// Shove a copy of `snap` and run it to the verdict.
+    fn try_shove(
+        &self,
+        snap: &Alone,
+        side: f64,
+        dv: f64,
+        settings: &OracleSettings,
+        view: DriverView,
+    ) -> (Outcome, bool) {
+        let pt = &self.params.target;
+        let mut run = snap.clone();
+        if view == DriverView::Held {
+            let x = run.plant.target_state();
+            let t = run.time();
+            run.held = Some(run.driver.command(t, None, &x, &run.road));
+        }
+        run.shove(side, dv, pt.lr, pt.width, settings.contact_back);
+        let outcome = loop {
+            if let Status::Done(o) = run.period() {
+                break o;
+            }
+        };
+        (outcome, run.monitor.metrics().at_rest)
+    }
+}
+
 /// Run the ideal-PIT search on one scenario.
 ///
 /// # Errors
 /// [`ScenarioError`] if the scenario's road or parameter set cannot be built, or a setting
 /// is bad ([`OracleSettings::validate`]).
 pub fn ideal_pit(sc: &Scenario, settings: &OracleSettings) -> Result<OracleReport, ScenarioError> {
-    settings.validate()?;
-    let params = sc.params.load()?;
-    let road = sc.build_road()?;
-    let plant = target_alone(sc, &params, &road)?;
-    let steps_per = (DT / plant.dt()).round().max(1.0) as usize;
-    let mut base = Alone {
-        plant,
-        driver: sc.target_driver(&params),
-        monitor: Monitor::for_scenario(sc)?,
-        road: road.clone(),
-        first_contact: None,
-        steps_per,
-        k: 0,
-    };
-    // The target alone: its stations (for the reach bound) and a snapshot at every
-    // candidate time.
-    let n = (sc.t_max / DT).ceil() as usize;
-    let every = ((settings.time_step / DT).round() as usize).max(1);
-    let mut stations = vec![sc.target.s];
-    let mut snapshots = vec![base.clone()];
-    let mut s_hint = sc.target.s;
-    let mut alone_fails_at = None;
-    for _ in 0..n {
-        let status = base.period();
-        let x = base.plant.target_state();
-        let f = road.project_with_hint(Vec2::new(x[6], x[7]), s_hint);
-        s_hint = f.s;
-        stations.push(f.s);
-        if let Status::Done(o) = status {
-            if let Outcome::Failure {
-                cause: FailureCause::BoundaryViolation | FailureCause::SecondaryCollision,
-                time,
-            } = o
-            {
-                alone_fails_at = Some(time);
-            }
-            break;
-        }
-        if base.k % every == 0 {
-            snapshots.push(base.clone());
-        }
-    }
-    let t_reach = reach_time(sc, &params, &stations, DT, &settings.screen);
-    let t_last = sc.t_max - settings.min_remaining;
-    let pt = &params.target;
+    let snaps = Snapshots::new(sc, settings)?;
+    let (t_reach, alone_fails_at) = (snaps.t_reach, snaps.alone_fails_at);
     let mut tried = 0;
     let mut successes = 0;
     let mut feasible = None;
-    for snap in &snapshots {
+    for snap in snaps.candidates(sc, settings) {
         let t = snap.time();
-        if t + 1e-9 < t_reach || t > t_last + 1e-9 || snap.monitor.outcome().is_some() {
-            continue;
-        }
-        if let Some([from, to]) = settings.window {
-            if t + 1e-9 < from || t > to + 1e-9 {
-                continue;
-            }
-        }
         for &dv in &settings.shoves {
             for &side in &settings.sides {
                 tried += 1;
-                let mut run = snap.clone();
-                run.shove(side, dv, pt.lr, pt.width, settings.contact_back);
-                let outcome = loop {
-                    if let Status::Done(o) = run.period() {
-                        break o;
-                    }
-                };
+                let (outcome, at_rest) =
+                    snaps.try_shove(snap, side, dv, settings, DriverView::True);
                 if let Outcome::Success { time } = outcome {
                     successes += 1;
                     feasible.get_or_insert(Shove {
@@ -273,7 +330,7 @@ pub fn ideal_pit(sc: &Scenario, settings: &OracleSettings) -> Result<OracleRepor
                         side,
                         dv,
                         decided_at: time,
-                        at_rest: run.monitor.metrics().at_rest,
+                        at_rest,
                     });
                     if !settings.exhaustive {
                         return Ok(OracleReport {
@@ -295,4 +352,211 @@ pub fn ideal_pit(sc: &Scenario, settings: &OracleSettings) -> Result<OracleRepor
         successes,
         alone_fails_at,
     })
+}
+
+/// What the chooser of a shove knows about the target's driver.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum DriverView {
+    /// The driver's own law, reacting to the contact: the truth.
+    #[default]
+    True,
+    /// The driver's command at the moment of the shove, held to the end: all that a planner
+    /// which sees the current command (and not the law behind it) can assume.
+    Held,
+}
+
+/// Every shove of the grid `times × sides × shoves`, simulated: which succeed.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct ShoveGrid {
+    /// Candidate contact times, ascending, spaced by `OracleSettings::time_step` (s).
+    pub times: Vec<f64>,
+    /// Sides (as [`OracleSettings::sides`]).
+    pub sides: Vec<f64>,
+    /// Shove sizes `J / m_T` (as [`OracleSettings::shoves`], in the order given) (m/s).
+    pub shoves: Vec<f64>,
+    /// `success[(i_time · sides + i_side) · shoves + i_shove]`.
+    pub success: Vec<bool>,
+    /// Earliest time the bullet can be at the PIT pose (s).
+    pub t_reach: f64,
+}
+
+/// A shove of a [`ShoveGrid`] by its indices, with the number of successes in its box.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GridChoice {
+    pub time: usize,
+    pub side: usize,
+    pub shove: usize,
+    /// Successes in the box around it (the shove itself included).
+    pub score: usize,
+    /// Shoves in the box (`(2 r_t + 1)(2 r_v + 1)`; neighbours outside the grid count as
+    /// failures).
+    pub of: usize,
+}
+
+impl ShoveGrid {
+    /// Whether shove `(time, side, shove)` succeeded; `false` outside the grid.
+    #[must_use]
+    pub fn get(&self, time: isize, side: usize, shove: isize) -> bool {
+        let (nt, ns, nv) = (self.times.len(), self.sides.len(), self.shoves.len());
+        if time < 0 || shove < 0 || time as usize >= nt || shove as usize >= nv || side >= ns {
+            return false;
+        }
+        self.success[(time as usize * ns + side) * nv + shove as usize]
+    }
+
+    /// Successes in the box of `±radius_time` neighbouring times and `±radius_shove`
+    /// neighbouring sizes (same side) around a shove: how much a timing or size error of
+    /// that order forgives.
+    #[must_use]
+    pub fn box_score(
+        &self,
+        time: usize,
+        side: usize,
+        shove: usize,
+        radius_time: usize,
+        radius_shove: usize,
+    ) -> usize {
+        let (rt, rv) = (radius_time as isize, radius_shove as isize);
+        let mut n = 0;
+        for dt in -rt..=rt {
+            for dv in -rv..=rv {
+                n += usize::from(self.get(time as isize + dt, side, shove as isize + dv));
+            }
+        }
+        n
+    }
+
+    /// The earliest successful shove (time first, then size in the grid's order, then side:
+    /// the order of [`ideal_pit`]).
+    #[must_use]
+    pub fn earliest(&self) -> Option<GridChoice> {
+        for it in 0..self.times.len() {
+            for iv in 0..self.shoves.len() {
+                for is in 0..self.sides.len() {
+                    if self.get(it as isize, is, iv as isize) {
+                        return Some(GridChoice {
+                            time: it,
+                            side: is,
+                            shove: iv,
+                            score: 1,
+                            of: 1,
+                        });
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    /// The successful shove whose box holds the most successes (the one that forgives the
+    /// most); ties go to the earliest, then the first size and side.
+    #[must_use]
+    pub fn most_robust(&self, radius_time: usize, radius_shove: usize) -> Option<GridChoice> {
+        let of = (2 * radius_time + 1) * (2 * radius_shove + 1);
+        let mut best: Option<GridChoice> = None;
+        for it in 0..self.times.len() {
+            for iv in 0..self.shoves.len() {
+                for is in 0..self.sides.len() {
+                    if !self.get(it as isize, is, iv as isize) {
+                        continue;
+                    }
+                    let score = self.box_score(it, is, iv, radius_time, radius_shove);
+                    if best.is_none_or(|b| score > b.score) {
+                        best = Some(GridChoice {
+                            time: it,
+                            side: is,
+                            shove: iv,
+                            score,
+                            of,
+                        });
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
+/// Simulate every shove of the grid on one scenario, with the driver as `view` says.
+///
+/// The snapshots are the truth in both views (the state at the shove is what it is); with
+/// [`DriverView::Held`] the driver's command at the shove is held from then on, so the grid
+/// is what a chooser who does not know the driver's law would believe.
+///
+/// # Errors
+/// As [`ideal_pit`].
+pub fn shove_grid(
+    sc: &Scenario,
+    settings: &OracleSettings,
+    view: DriverView,
+) -> Result<ShoveGrid, ScenarioError> {
+    let snaps = Snapshots::new(sc, settings)?;
+    let mut grid = ShoveGrid {
+        times: Vec::new(),
+        sides: settings.sides.clone(),
+        shoves: settings.shoves.clone(),
+        success: Vec::new(),
+        t_reach: snaps.t_reach,
+    };
+    for snap in snaps.candidates(sc, settings) {
+        grid.times.push(snap.time());
+        for &side in &settings.sides {
+            for &dv in &settings.shoves {
+                let (outcome, _) = snaps.try_shove(snap, side, dv, settings, view);
+                grid.success
+                    .push(matches!(outcome, Outcome::Success { .. }));
+            }
+        }
+    }
+    Ok(grid)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 4-time × 1-side × 3-size grid from rows of `'x'` (success) and `'.'`.
+    fn grid(rows: [&str; 4]) -> ShoveGrid {
+        ShoveGrid {
+            times: vec![1.0, 1.1, 1.2, 1.3],
+            sides: vec![1.0],
+            shoves: vec![1.0, 1.25, 1.6],
+            success: rows
+                .iter()
+                .flat_map(|r| r.chars().map(|c| c == 'x'))
+                .collect(),
+            t_reach: 1.0,
+        }
+    }
+
+    #[test]
+    fn box_scores_count_neighbours_and_nothing_outside_the_grid() {
+        let g = grid(["..x", "xxx", "xxx", "x.."]);
+        assert_eq!(g.box_score(1, 0, 1, 1, 1), 7);
+        assert_eq!(
+            g.box_score(0, 0, 0, 1, 1),
+            2,
+            "the corner's box is half outside"
+        );
+        assert_eq!(g.box_score(2, 0, 1, 0, 0), 1);
+        assert!(!g.get(-1, 0, 0) && !g.get(4, 0, 0) && !g.get(0, 0, 3) && !g.get(0, 1, 0));
+    }
+
+    #[test]
+    fn the_most_robust_shove_is_the_one_with_the_fullest_box_and_the_earliest_on_ties() {
+        let g = grid(["..x", "xxx", "xxx", "x.."]);
+        assert_eq!(g.earliest().map(|c| (c.time, c.shove)), Some((0, 2)));
+        let c = g.most_robust(1, 1).unwrap();
+        assert_eq!((c.time, c.shove, c.score, c.of), (1, 1, 7, 9));
+        let c = g.most_robust(1, 0).unwrap();
+        assert_eq!(
+            (c.time, c.shove, c.score, c.of),
+            (1, 2, 3, 3),
+            "the earliest full column"
+        );
+        assert!(grid(["...", "...", "...", "..."])
+            .most_robust(1, 1)
+            .is_none());
+    }
 }

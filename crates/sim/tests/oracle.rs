@@ -3,7 +3,7 @@
 
 mod common;
 
-use sim::oracle::{ideal_pit, OracleSettings};
+use sim::oracle::{ideal_pit, shove_grid, DriverView, OracleSettings};
 use sim::scenario::Scenario;
 
 fn scenario(v: &serde_json::Value) -> Scenario {
@@ -88,4 +88,54 @@ fn bad_settings_are_refused_naming_the_field() {
         let err = ideal_pit(&sc, &settings).unwrap_err().to_string();
         assert!(err.contains(field), "{err}");
     }
+}
+
+/// The grid holds exactly the shoves the search tries, and the search's first success is
+/// the grid's earliest.
+#[test]
+fn the_shove_grid_agrees_with_the_search() {
+    let sc = scenario(&common::straight());
+    let settings = OracleSettings {
+        exhaustive: true,
+        ..shoves(&[1.5, 2.0, 2.5, 3.0])
+    };
+    let r = ideal_pit(&sc, &settings).unwrap();
+    let g = shove_grid(&sc, &settings, DriverView::True).unwrap();
+    assert_eq!(g.success.len(), r.tried);
+    assert_eq!(g.success.len(), g.times.len() * 2 * 4);
+    assert_eq!(g.success.iter().filter(|&&b| b).count(), r.successes);
+    assert!(r.successes > 0, "{r:?}");
+    assert!(
+        g.times.windows(2).all(|w| (w[1] - w[0] - 0.5).abs() < 1e-9),
+        "{:?}",
+        g.times
+    );
+    let (f, c) = (r.feasible.unwrap(), g.earliest().unwrap());
+    assert_eq!(
+        (f.time, f.side, f.dv),
+        (g.times[c.time], g.sides[c.side], g.shoves[c.shove])
+    );
+}
+
+/// A driver whose command never changes (fixed steer, no reaction to the contact) is the
+/// same whether the chooser knows the law or holds the command; a lane keeper, whose
+/// steer follows the spinning target, is not.
+#[test]
+fn holding_the_command_changes_nothing_for_a_driver_without_feedback() {
+    let mut v = common::straight();
+    v["driver"] = serde_json::json!({"kind": "none", "steer": 0.0});
+    let settings = shoves(&[1.5, 2.0, 2.5, 3.0]);
+    let sc = scenario(&v);
+    let truth = shove_grid(&sc, &settings, DriverView::True).unwrap();
+    let held = shove_grid(&sc, &settings, DriverView::Held).unwrap();
+    assert_eq!(truth, held);
+
+    let sc = scenario(&common::straight());
+    let truth = shove_grid(&sc, &settings, DriverView::True).unwrap();
+    let held = shove_grid(&sc, &settings, DriverView::Held).unwrap();
+    assert_eq!(truth.times, held.times);
+    assert_ne!(
+        truth.success, held.success,
+        "the lane keeper's steer matters after a shove"
+    );
 }
