@@ -53,14 +53,13 @@ fn tiers(truth: &ShoveGrid, held: &ShoveGrid) -> [f64; 8] {
         })
     };
     let pick = held.most_robust(1, 1);
+    let best = truth.most_robust(1, 1);
     [
         at(truth.earliest()),
         whole(truth, 1, 0),
         whole(truth, 0, 1),
-        whole(truth, 1, 1),
-        truth
-            .most_robust(1, 1)
-            .map_or(0.0, |c| c.score as f64 / c.of as f64),
+        f64::from(u8::from(best.is_some_and(|c| c.score == c.of))),
+        best.map_or(0.0, |c| c.score as f64 / c.of as f64),
         at(held.earliest()),
         at(pick),
         expected(pick),
@@ -69,9 +68,17 @@ fn tiers(truth: &ShoveGrid, held: &ShoveGrid) -> [f64; 8] {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let first: usize = args.first().and_then(|s| s.parse().ok()).unwrap_or(0);
-    let count: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(192);
-    let threads: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(2).max(1);
+    let number = |i: usize, name: &str, default: usize| -> usize {
+        args.get(i).map_or(default, |s| {
+            s.parse().unwrap_or_else(|_| {
+                eprintln!("{name}: {s:?} is not a non-negative integer");
+                std::process::exit(2);
+            })
+        })
+    };
+    let first = number(0, "FIRST", 0);
+    let count = number(1, "COUNT", 192);
+    let threads = number(2, "THREADS", 2).max(1);
     let default = r#"{"shoves":[0.4,0.5,0.63,0.8,1.0,1.25,1.6,2.0,2.5,3.15],"time_step":0.1}"#;
     let settings: OracleSettings =
         match serde_json::from_str(args.get(3).map_or(default, String::as_str)) {
