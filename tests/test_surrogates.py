@@ -20,12 +20,12 @@ from safetensors.numpy import load_file, save_file  # noqa: E402
 from picopit import _core, load_params_dict  # noqa: E402
 from picopit import datagen  # noqa: E402
 from picopit.cli import main  # noqa: E402
-from picopit.compress import TensorClusters, choose_threshold, compressed_model  # noqa: E402
+from picopit.compress import CompressConfig, TensorClusters, choose_threshold, compressed_model  # noqa: E402
 from picopit.physics import FourDof  # noqa: E402
 from picopit.surrogate_nn import (FEATURES, OUTPUTS, ModelFileError, apply_increments,  # noqa: E402
                                   dense_mlp, features, increments, linear_base, load_model,
                                   physics_base, save_model)
-from picopit.train import Split, physics_targets  # noqa: E402
+from picopit.train import STATE_TO_OUT, Split, TrainError, one_step_loss, physics_targets  # noqa: E402
 
 
 def _random_inputs(rng, n, contact=True):
@@ -167,6 +167,37 @@ def test_network_adds_the_linear_base_to_its_residual():
         m2 = dense_mlp((11, 16, 8), _stats(np.random.default_rng(9)), seed=3, dt=0.05, base=BASE)
         z_wet = features(_t(x), _t(u), _t(fc), _t(gamma), _t(point), 0.2)
         assert not torch.allclose(m2(z), m2(z_wet))
+
+
+def test_output_weights_weigh_each_output_and_its_state():
+    """The weighted one-step loss is Σ_k w_k MSE_k / 8 over the outputs; the rollout's state
+    weights are the same weights mapped from outputs to states (Δψ's weight on ψ)."""
+    rng = np.random.default_rng(11)
+    m = dense_mlp((11, 16, 8), _stats(rng), seed=3, dt=0.05, base=BASE)
+    x, u, fc, gamma, point = _random_inputs(rng, 50)
+    z = features(_t(x), _t(u), _t(fc), _t(gamma), _t(point), 0.5)
+    o = _t(rng.normal(size=(50, 8)) * 0.01)
+    w = torch.tensor([1.0, 2.0, 4.0, 1.0, 1.0, 4.0, 1.0, 1.0])
+    with torch.no_grad():
+        per = (((m(z) - o) / m.out_std) ** 2).mean(0)
+        assert torch.isclose(one_step_loss(m, z, o), per.mean(), rtol=1e-13)
+        assert torch.isclose(one_step_loss(m, z, o, weights=w), (w * per).sum() / 8, rtol=1e-13)
+    # Δψ is output 5 and ψ is state 2; Δr output 2, r state 3.
+    assert STATE_TO_OUT[2] == 5 and STATE_TO_OUT[3] == 2
+    assert w[list(STATE_TO_OUT)].tolist() == [1.0, 2.0, 4.0, 4.0, 1.0, 1.0, 1.0, 1.0]
+
+
+@pytest.mark.parametrize("edit, name", [
+    ({"output_weights": (1.0,) * 7}, "output_weights"),
+    ({"output_weights": (1.0, -1.0, 1, 1, 1, 1, 1, 1)}, "output_weights"),
+    ({"output_weights": (0.0,) * 8}, "output_weights"),
+    ({"output_weights": (float("nan"),) + (1.0,) * 7}, "output_weights"),
+])
+def test_compress_config_errors_name_the_field(edit, name):
+    CompressConfig().validate()
+    CompressConfig(output_weights=None).validate()
+    with pytest.raises(TrainError, match=name):
+        CompressConfig(**edit).validate()
 
 
 # --------------------------------------------------------------------------------------
@@ -453,6 +484,10 @@ def test_cli_bad_input_exits_2_naming_the_problem(tmp_path, capsys):
     assert "base" in err and "impulse" in err
     assert main(["datagen", "--params", "nope", "--out", str(tmp_path / "d")]) == 2
     assert "params" in capsys.readouterr().err
+    for bad in ("1,2,x,1,1,4,1,1", "1,2,4"):
+        assert main(["compress", "--teacher", str(tmp_path / "t.safetensors"), "--data", str(tmp_path),
+                     "--out", str(tmp_path / "c"), "--output-weights", bad]) == 2
+        assert "output_weights" in capsys.readouterr().err
 
 
 def test_contact_timing_script_reports_every_row(tmp_path, capsys):

@@ -11,7 +11,7 @@ import dataclasses
 import datetime as _dt
 import sys
 from pathlib import Path
-from typing import Any, Dict, List, NoReturn, Optional
+from typing import Any, Dict, List, NoReturn, Optional, Tuple
 
 EXIT_BAD_INPUT = 2
 
@@ -153,6 +153,11 @@ def _compress_parser(sub) -> None:
     p.add_argument("--retrain-epochs", type=int, default=d.retrain_epochs, help=f"(default {d.retrain_epochs})")
     p.add_argument("--w-physics", type=float, default=d.w_physics, help=f"physics weight in retraining (default {d.w_physics})")
     p.add_argument("--no-physics", action="store_true", help="ablation: physics weight 0 in retraining")
+    p.add_argument("--w-rollout", type=float, default=d.w_rollout, help=f"rollout weight in retraining (default {d.w_rollout})")
+    p.add_argument("--horizon", type=int, default=d.horizon, help=f"rollout steps in retraining (default {d.horizon})")
+    p.add_argument("--output-weights", metavar="W1,...,W8",
+                   help="per-output loss weights (dvx,dvy,dr,dp,dphi,dpsi,dx,dy; default "
+                        + ",".join(f"{w:g}" for w in d.output_weights) + "; 'none' for all 1)")
     p.add_argument("--seed", type=int, default=d.seed, help=f"random seed (default {d.seed})")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_compress)
@@ -470,12 +475,32 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _float_list(name: str, text: Optional[str]) -> Optional[Tuple[float, ...]]:
+    """A comma-separated list of numbers, or None; a bad entry is refused naming the option."""
+    if text is None or text == "none":
+        return None
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        from .train import TrainError
+
+        raise TrainError(f"{name} = {text!r}: expected comma-separated numbers") from None
+
+
 def _cmd_compress(args: argparse.Namespace) -> int:
     from . import datagen
     from .compress import CompressConfig, compress
     from .surrogate_nn import load_model, save_model
     from .train import parse_layers
 
+    cfg = CompressConfig(
+        student=parse_layers(args.student), budget=args.budget, distil_epochs=args.distil_epochs,
+        retrain_epochs=args.retrain_epochs, w_physics=0.0 if args.no_physics else args.w_physics,
+        w_rollout=args.w_rollout, horizon=args.horizon,
+        output_weights=(CompressConfig().output_weights if args.output_weights is None
+                        else _float_list("output_weights", args.output_weights)),
+        seed=args.seed,
+    ).validate()
     ds = datagen.load(Path(args.data))
     teacher, meta = load_model(Path(args.teacher))
     if meta["param_set"] != ds.param_set:
@@ -486,11 +511,6 @@ def _cmd_compress(args: argparse.Namespace) -> int:
         from .datagen import DatasetError
 
         raise DatasetError(f"dt: teacher {args.teacher} steps {teacher.dt} s, data {ds.manifest['dt']} s")
-    cfg = CompressConfig(
-        student=parse_layers(args.student), budget=args.budget, distil_epochs=args.distil_epochs,
-        retrain_epochs=args.retrain_epochs, w_physics=0.0 if args.no_physics else args.w_physics,
-        seed=args.seed,
-    ).validate()
     out = Path(args.out)
     pico, info = compress(teacher, ds, cfg, out, progress=not args.no_progress)
     path = Path(args.model) if args.model else out / "picopinn.safetensors"

@@ -202,10 +202,12 @@ def physics_targets(s: Split, model4: FourDof, collocation: float, seed: int) ->
 
 
 def one_step_loss(model: GatherMLP, z: torch.Tensor, o: torch.Tensor,
-                  scale: Optional[torch.Tensor] = None) -> torch.Tensor:
+                  scale: Optional[torch.Tensor] = None,
+                  weights: Optional[torch.Tensor] = None) -> torch.Tensor:
     """Mean squared increment error, each output divided by ``scale`` (default: the model's
-    output std)."""
-    return (((model(z) - o) / (model.out_std if scale is None else scale)) ** 2).mean()
+    output std) and, if given, weighted per output by ``weights`` (mean 1)."""
+    e = ((model(z) - o) / (model.out_std if scale is None else scale)) ** 2
+    return (e if weights is None else e * weights).mean()
 
 
 def increment_scale(s: Split) -> torch.Tensor:
@@ -216,14 +218,18 @@ def increment_scale(s: Split) -> torch.Tensor:
 
 
 def rollout_loss(model: GatherMLP, s: Split, starts: torch.Tensor, horizon: int,
-                 scale: torch.Tensor) -> torch.Tensor:
+                 scale: torch.Tensor, weights: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """Mean squared state error over a ``horizon``-step rollout, per state divided by
+    ``scale`` times the step number; ``weights`` (per output, as ``one_step_loss``) are
+    applied to the matching states."""
     x = s.x[starts]
     total = 0.0
+    ws = None if weights is None else weights[list(STATE_TO_OUT)]
     for j in range(horizon):
         k = starts + j
         x = model.step(x, s.u[k], s.fc[k], s.gamma[k], s.point[k], s.mu[k])
-        err = (x - s.x_next[k]) / (scale * (j + 1))
-        total = total + (err ** 2).mean()
+        err = ((x - s.x_next[k]) / (scale * (j + 1))) ** 2
+        total = total + (err if ws is None else err * ws).mean()
     return total / horizon
 
 
@@ -344,8 +350,9 @@ def output_scale(model: GatherMLP, tr: Split, how: str) -> torch.Tensor:
 
 def supervised_loss(model: GatherMLP, tr: Split, phys: Optional[PhysicsTargets], w_data: float,
                     w_rollout: float, w_physics: float, horizon: int, batch: int,
-                    loss_scale: str = "geometric"):
-    """The data + rollout + physics loss used by ``train`` and PicoPINN retraining."""
+                    loss_scale: str = "geometric", weights: Optional[torch.Tensor] = None):
+    """The data + rollout + physics loss used by ``train`` and PicoPINN retraining
+    (``weights``: per output, see ``one_step_loss``)."""
     n_phys = 0 if phys is None else int(phys.z.shape[0])
     scale = increment_scale(tr)
     oscale = output_scale(model, tr, loss_scale)
@@ -355,16 +362,16 @@ def supervised_loss(model: GatherMLP, tr: Split, phys: Optional[PhysicsTargets],
         parts: Dict[str, float] = {}
         total = torch.zeros((), dtype=torch.float64)
         if w_data > 0:
-            l = one_step_loss(model, tr.z[idx], tr.o[idx], oscale)
+            l = one_step_loss(model, tr.z[idx], tr.o[idx], oscale, weights)
             total = total + w_data * l
             parts["data"] = float(l.detach())
         if w_rollout > 0 and widx is not None and len(tr.win):
-            l = rollout_loss(model, tr, tr.win[widx], horizon, scale)
+            l = rollout_loss(model, tr, tr.win[widx], horizon, scale, weights)
             total = total + w_rollout * l
             parts["rollout"] = float(l.detach())
         if w_physics > 0 and n_phys:
             pi = torch.randint(0, n_phys, (batch,), generator=g)
-            l = one_step_loss(model, phys.z[pi], phys.o[pi], oscale)
+            l = one_step_loss(model, phys.z[pi], phys.o[pi], oscale, weights)
             total = total + w_physics * l
             parts["physics"] = float(l.detach())
         parts["total"] = float(total.detach())
