@@ -26,5 +26,7 @@ pub use oracle::{
     ideal_pit, shove_grid, DriverView, GridChoice, OracleReport, OracleSettings, ShoveGrid,
 };
 pub use outcome::{FailureCause, JudgeSettings, Metrics, Monitor, Observation, Outcome, Status};
-pub use scenario::{load_jsonl, parse_jsonl, Scenario, ScenarioError, TargetDriver};
+pub use scenario::{
+    load_jsonl, parse_jsonl, DriverHypothesis, Scenario, ScenarioError, TargetDriver,
+};
 pub use screen::{screen, ScreenReport, ScreenSettings, Verdict};

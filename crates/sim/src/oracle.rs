@@ -16,7 +16,7 @@
 //! follow-up). It measures how much of the dataset a PIT can save at all.
 
 use crate::outcome::{FailureCause, Monitor, Observation, Outcome, Status};
-use crate::scenario::{Scenario, ScenarioError};
+use crate::scenario::{DriverHypothesis, Scenario, ScenarioError};
 use crate::screen::{reach_time, target_alone, ScreenSettings};
 use dynamics::geometry::{rotate, Vec2};
 use dynamics::plant::{Plant, Which};
@@ -290,10 +290,18 @@ impl Snapshots {
     ) -> (Outcome, bool) {
         let pt = &self.params.target;
         let mut run = snap.clone();
-        if view == DriverView::Held {
-            let x = run.plant.target_state();
-            let t = run.time();
-            run.held = Some(run.driver.command(t, None, &x, &run.road));
+        match view {
+            DriverView::True => {}
+            DriverView::Held => {
+                let x = run.plant.target_state();
+                let t = run.time();
+                run.held = Some(run.driver.command(t, None, &x, &run.road));
+            }
+            DriverView::Assume(h) => {
+                let x = run.plant.target_state();
+                let d = run.road.project(Vec2::new(x[6], x[7])).d;
+                run.driver = run.driver.hypothesis(h, d);
+            }
         }
         run.shove(side, dv, pt.lr, pt.width, settings.contact_back);
         let outcome = loop {
@@ -364,6 +372,9 @@ pub enum DriverView {
     /// The driver's command at the moment of the shove, held to the end: all that a planner
     /// which sees the current command (and not the law behind it) can assume.
     Held,
+    /// From the shove on, a hypothesised reaction in place of the driver's law
+    /// ([`TargetDriver::hypothesis`]): what a planner with that driver model would believe.
+    Assume(DriverHypothesis),
 }
 
 /// Every shove of the grid `times × sides × shoves`, simulated: which succeed.

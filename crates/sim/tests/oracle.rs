@@ -139,3 +139,31 @@ fn holding_the_command_changes_nothing_for_a_driver_without_feedback() {
         "the lane keeper's steer matters after a shove"
     );
 }
+
+/// A chooser whose hypothesis is the driver's own law sees the truth: on a lane keeper the
+/// lane-keeping hypothesis gives the true grid, and letting go of the wheel does not.
+#[test]
+fn the_right_driver_hypothesis_is_the_truth() {
+    use sim::DriverHypothesis;
+    let settings = shoves(&[1.5, 2.0, 2.5, 3.0]);
+    let sc = scenario(&common::straight());
+    let truth = shove_grid(&sc, &settings, DriverView::True).unwrap();
+    let keep = shove_grid(
+        &sc,
+        &settings,
+        DriverView::Assume(DriverHypothesis::LaneKeep),
+    )
+    .unwrap();
+    assert_eq!(truth, keep);
+    let release = shove_grid(
+        &sc,
+        &settings,
+        DriverView::Assume(DriverHypothesis::Release),
+    )
+    .unwrap();
+    assert_eq!(truth.times, release.times);
+    assert_ne!(
+        truth.success, release.success,
+        "the lane keeper's steer matters"
+    );
+}

@@ -213,3 +213,69 @@ fn a_lane_keeping_target_stays_in_its_lane_on_the_curve() {
     // 10 s, through the clothoid into the arc: within 0.5 m of the lane centre.
     assert!(worst < 0.5, "lane error {worst}");
 }
+
+/// A reaction hypothesis keeps what the chooser saw before the contact (the lane keeper's
+/// line and gain) and replaces only the reaction: before the contact every hypothesis
+/// steers as the driver does; after it, braking brakes at 35 % from 0.5 s, letting go
+/// neither steers nor brakes, counter-steering steers against the yaw rate from 0.5 s.
+#[test]
+fn a_driver_hypothesis_replaces_only_the_reaction_to_the_contact() {
+    use sim::DriverHypothesis as H;
+    let sc = Scenario::from_json_line(&common::curved().to_string(), 1).unwrap();
+    let params = sc.params.load().unwrap();
+    let road = sc.build_road().unwrap();
+    let (_, ti) = sc.initial_states(&road);
+    let mut x = dynamics::target::TargetState::zeros();
+    x.copy_from_slice(&[ti.vx, ti.vy, ti.yaw, ti.r, 0.0, 0.0, ti.x, ti.y + 0.3]);
+    x[3] = 0.4;
+    let brake_max = params.target.brake_torque_max;
+    let driver = sc.target_driver(&params);
+    let before = {
+        let mut d = driver;
+        d.command(1.0, None, &x, &road)
+    };
+    assert!(before.0.abs() > 1e-4 && before.1 == 0.0, "{before:?}");
+    for h in [H::LaneKeep, H::Release, H::Brake, H::CounterSteer] {
+        let mut d = driver.hypothesis(h, 0.0);
+        if h != H::Release {
+            assert_eq!(
+                d.command(1.0, None, &x, &road),
+                before,
+                "{h:?} before the contact"
+            );
+        }
+        let early = d.command(1.2, Some(1.0), &x, &road);
+        let late = d.command(1.6, Some(1.0), &x, &road);
+        match h {
+            H::LaneKeep => assert_eq!(late, before),
+            H::Release => assert_eq!((early, late), ((0.0, 0.0), (0.0, 0.0))),
+            H::Brake => {
+                assert_eq!(early, (0.0, 0.0));
+                assert!(
+                    (late.1 - 0.35 * brake_max).abs() < 1e-9 && late.0 == 0.0,
+                    "{late:?}"
+                );
+            }
+            H::CounterSteer => {
+                assert_eq!(early, (0.0, 0.0));
+                assert!(
+                    (late.0 + 0.25 * 0.4).abs() < 1e-12 && late.1 == 0.0,
+                    "{late:?}"
+                );
+            }
+        }
+    }
+    // A driver without input is taken as a lane keeper of the line it is on.
+    let mut v = common::curved();
+    v["driver"] = json!({"kind": "none", "steer": 0.05});
+    let sc = Scenario::from_json_line(&v.to_string(), 1).unwrap();
+    let f = road.project(dynamics::geometry::Vec2::new(x[6], x[7]));
+    let mut on_line = sc.target_driver(&params).hypothesis(H::LaneKeep, f.d);
+    let mut off_line = sc.target_driver(&params).hypothesis(H::LaneKeep, f.d + 1.0);
+    let a = on_line.command(1.0, Some(0.5), &x, &road).0;
+    let b = off_line.command(1.0, Some(0.5), &x, &road).0;
+    assert!(
+        (b - a - 0.05).abs() < 1e-9,
+        "{a} {b}: the line enters as k_d = 0.05 rad/m"
+    );
+}
