@@ -156,8 +156,7 @@ def _compress_parser(sub) -> None:
     p.add_argument("--w-rollout", type=float, default=d.w_rollout, help=f"rollout weight in retraining (default {d.w_rollout})")
     p.add_argument("--horizon", type=int, default=d.horizon, help=f"rollout steps in retraining (default {d.horizon})")
     p.add_argument("--output-weights", metavar="W1,...,W8",
-                   help="per-output loss weights (dvx,dvy,dr,dp,dphi,dpsi,dx,dy; default "
-                        + ",".join(f"{w:g}" for w in d.output_weights) + "; 'none' for all 1)")
+                   help="per-output loss weights (dvx,dvy,dr,dp,dphi,dpsi,dx,dy; default all 1)")
     p.add_argument("--seed", type=int, default=d.seed, help=f"random seed (default {d.seed})")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_compress)
@@ -477,7 +476,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 def _float_list(name: str, text: Optional[str]) -> Optional[Tuple[float, ...]]:
     """A comma-separated list of numbers, or None; a bad entry is refused naming the option."""
-    if text is None or text == "none":
+    if text is None:
         return None
     try:
         return tuple(float(v) for v in text.split(","))
@@ -497,8 +496,7 @@ def _cmd_compress(args: argparse.Namespace) -> int:
         student=parse_layers(args.student), budget=args.budget, distil_epochs=args.distil_epochs,
         retrain_epochs=args.retrain_epochs, w_physics=0.0 if args.no_physics else args.w_physics,
         w_rollout=args.w_rollout, horizon=args.horizon,
-        output_weights=(CompressConfig().output_weights if args.output_weights is None
-                        else _float_list("output_weights", args.output_weights)),
+        output_weights=_float_list("output_weights", args.output_weights),
         seed=args.seed,
     ).validate()
     ds = datagen.load(Path(args.data))

@@ -1,7 +1,7 @@
 """``picopit compress``: PicoPINN from a teacher PINN by the Ψ-NN recipe.
 
 1. Distil a narrower student on the teacher's outputs (training samples and collocation
-   points), weighted per output (``output_weights``), with the parameter-norm penalty
+   points), weighted per output (``output_weights``, default all 1), with the norm penalty
    1e-3·Σ‖W‖₂ (unsquared Frobenius norms of the weight matrices) and no physics term.
 2. Per weight tensor, Ward hierarchical clustering of |w| (``scipy.cluster.hierarchy``); flat
    clusters at the distance threshold ``t · max|w|`` (one normalised threshold ``t`` for
@@ -59,13 +59,13 @@ class CompressConfig:
     rollout_batch: int = 256
     collocation: float = 0.5
     loss_scale: str = "geometric"
-    output_weights: Optional[Tuple[float, ...]] = (1.0, 2.0, 4.0, 1.0, 1.0, 4.0, 1.0, 1.0)
+    output_weights: Optional[Tuple[float, ...]] = None
     """Per output (Δvx, Δvy, Δr, Δp, Δφ, Δψ, Δx_b, Δy_b), a weight on the distillation and
-    retraining losses (normalised to mean 1; None: all 1). The student has a quarter of the
-    teacher's weights; this spends them on the yaw rate, heading and side slip that the
-    heading prediction integrates. Against all 1 (seed 0, test split): full size one step
-    1.24 → 1.22 mrad, 2 s 0.080 → 0.079 rad; half scale 1.04 → 0.99 mrad, 0.074 → 0.065 rad
-    (docs/surrogates.md)."""
+    retraining losses (normalised to mean 1; None: all 1). Weighing the heading's outputs
+    (1, 2, 4, 1, 1, 4, 1, 1) lowered the PicoPINN's heading errors (full size 1.24 → 1.22
+    mrad, 0.080 → 0.079 rad over 2 s; half scale 1.04 → 0.99 mrad, 0.074 → 0.065 rad) but
+    raised its 2 s position and roll errors, and its closed-loop success fell from 15.2 to
+    14.1 % (docs/surrogates.md), so the shipped models use all 1."""
     seed: int = 0
 
     def validate(self) -> "CompressConfig":
