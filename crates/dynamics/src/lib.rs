@@ -24,10 +24,12 @@
 //! * [`bullet`]: the bullet's single-track control model with analytic Jacobians.
 //! * [`target4dof`]: the 4-DOF analytic target model, first [`TargetModel`].
 //! * [`plant`]: the high-fidelity two-vehicle plant (the truth).
+//! * [`driver`]: the target driver's lane-keeping law (scenario driver and planner alike).
 
 pub mod bullet;
 pub mod compare;
 pub mod contact;
+pub mod driver;
 pub mod error;
 pub mod geometry;
 mod integrate;

@@ -21,8 +21,9 @@
 //! after construction.
 
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
-use crate::settings::{length_scale, PlannerSettings};
+use crate::settings::{length_scale, PlannerSettings, TargetDriverModel};
 use dynamics::bullet::BulletState;
+use dynamics::driver::LaneKeeper;
 use dynamics::geometry::{rotate, Obb, Pose2, Vec2};
 use dynamics::params::ParamSet;
 use dynamics::road::{Obstacle, Road};
@@ -139,6 +140,9 @@ pub struct Planner {
     contact_x: f64,
     psi_rev: f64,
     input_u: TargetInput,
+    /// The target driver of the rollout (`PlannerSettings::target_driver`): `None` holds
+    /// `input_u`.
+    lane_keeper: Option<LaneKeeper>,
     time: f64,
 }
 
@@ -253,6 +257,7 @@ impl Planner {
             contact_x: rear_quarter_x(params),
             psi_rev: 0.0,
             input_u: TargetInput::zeros(),
+            lane_keeper: None,
             time: 0.0,
             settings,
         };
@@ -396,6 +401,7 @@ impl Planner {
         }
         self.time = input.time;
         self.input_u = input.target_input;
+        self.lane_keeper = self.driver_model(input);
         self.contact_x = self.contact_x_at(0.0);
         let lane = input
             .road
@@ -408,7 +414,7 @@ impl Planner {
             let side = input.side.unwrap_or_else(|| self.bullet_side(input));
             self.setup_candidate(side, self.n, lane);
             self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
-            self.rollout(&input.target, false, false);
+            self.rollout(Some(input.road), &input.target, false, false);
             self.linearise_rows(input.road, input.obstacles);
             let (_, heading_error, road_margin, clearance, stop_margin) = self.merit(false);
             let tol = self.settings.violation_tol;
@@ -557,6 +563,7 @@ impl Planner {
         }
         self.time = input.time;
         self.input_u = input.target_input;
+        self.lane_keeper = self.driver_model(input);
         self.contact_x = self.contact_x_at(0.0);
         let lane = input
             .road
@@ -649,9 +656,36 @@ impl Planner {
         }
     }
 
+    /// The rollout's target driver for this plan: a lane keeper of the lane centre nearest
+    /// the target (gain 1), or `None` to hold the current command.
+    fn driver_model(&self, input: &PlannerInput<'_>) -> Option<LaneKeeper> {
+        match self.settings.target_driver {
+            TargetDriverModel::Held => None,
+            TargetDriverModel::LaneKeep => {
+                let road = input.road;
+                let d = road
+                    .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
+                    .d;
+                let lanes = road.spec().lanes;
+                let offset = (0..lanes)
+                    .map(|l| road.lane_center_offset(l))
+                    .min_by(|a, b| (a - d).abs().total_cmp(&(b - d).abs()))
+                    .unwrap_or(0.0);
+                Some(LaneKeeper {
+                    offset,
+                    gain: 1.0,
+                    wheelbase: self.params.target.wheelbase(),
+                })
+            }
+        }
+    }
+
     /// Roll out with `forces` from `x0`; with `jac`, store the Jacobians and sensitivities.
-    fn rollout(&mut self, x0: &TargetState, use_trial: bool, jac: bool) {
+    /// With a lane keeper and a road, the driver's steer follows the predicted state (and
+    /// its gradient enters ∂x⁺/∂x); otherwise the command `input_u` is held.
+    fn rollout(&mut self, road: Option<&Road>, x0: &TargetState, use_trial: bool, jac: bool) {
         self.xs[0] = *x0;
+        let mut hint = f64::NAN;
         for k in 0..self.n {
             let f = if k >= self.k0 && k < self.k0 + self.w {
                 let j = k - self.k0;
@@ -665,9 +699,27 @@ impl Planner {
             };
             let c = self.contact(k, f, self.xs[k][idx::PSI]);
             let x = self.xs[k];
+            let (u, grad) = match (self.lane_keeper, road) {
+                (Some(lk), Some(road)) => {
+                    let p = Vec2::new(x[idx::X], x[idx::Y]);
+                    let fr = if hint.is_finite() {
+                        road.project_with_hint(p, hint)
+                    } else {
+                        road.project(p)
+                    };
+                    hint = fr.s;
+                    let (steer, g) = lk.steer_and_gradient(&x, &fr);
+                    (TargetInput::new(steer, self.input_u[1]), Some(g))
+                }
+                _ => (self.input_u, None),
+            };
             if jac {
-                let next = self.model.step_jac(&x, &self.input_u, &c, &mut self.jac);
+                let next = self.model.step_jac(&x, &u, &c, &mut self.jac);
                 let mut a = self.jac.a;
+                if let Some(g) = grad {
+                    // The driver's steer follows the state: ∂x⁺/∂x += ∂x⁺/∂δ · ∂δ/∂x.
+                    a += self.jac.b.column(0) * g.transpose();
+                }
                 if k >= self.k0 && k < self.k0 + self.w {
                     // γ turns with ψ: add ∂x⁺/∂γ = F · (J f_c) to the heading column.
                     let jf = Vec2::new(-c.fc.y, c.fc.x);
@@ -679,7 +731,7 @@ impl Planner {
                 self.jac_f[k] = self.jac.f;
                 self.xs[k + 1] = next;
             } else {
-                self.xs[k + 1] = self.model.step(&x, &self.input_u, &c);
+                self.xs[k + 1] = self.model.step(&x, &u, &c);
             }
         }
         if jac {
@@ -877,7 +929,7 @@ impl Planner {
     ) -> Option<Outcome> {
         self.setup_candidate(side, k0, lane);
         self.initial_guess(input);
-        self.rollout(&input.target, false, true);
+        self.rollout(Some(input.road), &input.target, false, true);
         self.linearise_rows(input.road, input.obstacles);
         let mut current = self.merit(false);
         if !current.0.is_finite() {
@@ -905,7 +957,7 @@ impl Planner {
                 self.trial[j] = Vec2::new(fx, self.friction_sign() * ft.clamp(0.0, mu_c * fx));
             }
             // Evaluate the candidate step on the nonlinear rollout.
-            self.rollout(&input.target, true, true);
+            self.rollout(Some(input.road), &input.target, true, true);
             self.linearise_rows(input.road, input.obstacles);
             let cand = self.merit(true);
             if cand.0.is_finite() && cand.0 <= current.0 {
@@ -914,7 +966,7 @@ impl Planner {
             } else {
                 // Rejected: back to the accepted forces, a smaller trust region.
                 trust *= 0.3;
-                self.rollout(&input.target, false, true);
+                self.rollout(Some(input.road), &input.target, false, true);
                 self.linearise_rows(input.road, input.obstacles);
             }
         }
@@ -956,7 +1008,7 @@ impl Planner {
                         Vec2::zeros()
                     };
                 }
-                self.rollout(&input.target, true, false);
+                self.rollout(Some(input.road), &input.target, true, false);
                 self.linearise_rows(input.road, input.obstacles);
                 let merit = self.merit(true).0;
                 if merit < best.0 {
@@ -1011,7 +1063,7 @@ impl Planner {
             self.contact_x = o.contact_x;
             self.setup_candidate(o.side, o.k0, lane);
         }
-        self.rollout(&input.target, false, false);
+        self.rollout(Some(input.road), &input.target, false, false);
         self.linearise_rows(input.road, input.obstacles);
         let merit = self.merit(false);
         let s = &self.settings;
@@ -1361,7 +1413,7 @@ mod tests {
             x0[idx::PSI] = psi;
             p.setup_candidate(Side::Left, p.n, 0.0);
             p.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
-            p.rollout(&x0, false, false);
+            p.rollout(None, &x0, false, false);
             p.slide_margin(&road)
         };
         let along = margin(&mut p, 0.0);
@@ -1376,6 +1428,29 @@ mod tests {
     /// differences of the nonlinear rollout.
     #[test]
     fn rollout_sensitivities_match_finite_differences() {
+        check_sensitivities(None);
+    }
+
+    /// The same with a lane-keeping driver in the rollout, whose steer follows the
+    /// predicted state (its gradient enters ∂x⁺/∂x).
+    #[test]
+    fn rollout_sensitivities_with_a_lane_keeping_driver_match_finite_differences() {
+        use dynamics::road::{RoadSpec, SegmentSpec};
+        let road = Road::new(RoadSpec {
+            segments: vec![SegmentSpec::Arc {
+                length: 300.0,
+                curvature: 0.01,
+            }],
+            lanes: 2,
+            lane_width: 3.5,
+            shoulder: 0.5,
+            origin: [0.0, 0.0, 0.0],
+        })
+        .unwrap();
+        check_sensitivities(Some(&road));
+    }
+
+    fn check_sensitivities(road: Option<&Road>) {
         let params = ParamSet::builtin("full_size").unwrap();
         let s = PlannerSettings::default();
         let model = Box::new(FourDofTarget::new(&params.target, 0.9, s.dt));
@@ -1383,11 +1458,18 @@ mod tests {
         let mut x0 = TargetState::zeros();
         x0[idx::VX] = 15.0;
         x0[idx::R] = 0.2;
+        if road.is_some() {
+            p.lane_keeper = Some(LaneKeeper {
+                offset: 1.75,
+                gain: 1.0,
+                wheelbase: params.target.wheelbase(),
+            });
+        }
         p.setup_candidate(Side::Left, 5, 0.0);
         for (j, f) in p.forces.iter_mut().enumerate() {
             *f = Vec2::new(4000.0 + 500.0 * j as f64, 300.0);
         }
-        p.rollout(&x0, false, true);
+        p.rollout(road, &x0, false, true);
         let sens = p.sens.clone();
         let cols = 2 * p.w;
         let h = 1.0; // N
@@ -1396,11 +1478,11 @@ mod tests {
                 let base = p.forces.clone();
                 p.trial.copy_from_slice(&base);
                 p.trial[j][d] += h;
-                p.rollout(&x0, true, false);
+                p.rollout(road, &x0, true, false);
                 let plus = p.xs.clone();
                 p.trial.copy_from_slice(&base);
                 p.trial[j][d] -= h;
-                p.rollout(&x0, true, false);
+                p.rollout(road, &x0, true, false);
                 let minus = p.xs.clone();
                 for k in [p.k0 + j + 1, p.n] {
                     for st in [idx::VY, idx::PSI, idx::R, idx::X, idx::Y] {

@@ -141,6 +141,10 @@ pub struct PlannerSettings {
     /// The free slide after the look-ahead (s): each candidate's prediction is rolled on
     /// without force for this long, and its footprint must stay inside the road (0: off).
     pub check_horizon: f64,
+    /// The target driver in the rollout: `held` (its current command, held) or
+    /// `lane_keep` (a lane keeper of the line the target is on, gain 1, its brake held;
+    /// `docs/planner.md`).
+    pub target_driver: TargetDriverModel,
     /// Deceleration of the spun, sliding target used for the post-PIT stopping point
     /// (fraction of μ g).
     pub stop_decel_fraction: f64,
@@ -153,6 +157,18 @@ pub struct PlannerSettings {
     pub weights: PlanWeights,
     /// Clarabel settings of the planner's QPs.
     pub qp: mpc::settings::QpSettings,
+}
+
+/// What the planner's rollout assumes the target's driver does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TargetDriverModel {
+    /// The driver's current command, held over the look-ahead.
+    #[default]
+    Held,
+    /// A lane keeper (`dynamics::driver::LaneKeeper`) of the line the target is on when
+    /// the plan starts, gain 1; the brake command is held.
+    LaneKeep,
 }
 
 impl Default for PlannerSettings {
@@ -186,6 +202,7 @@ impl Default for PlannerSettings {
             heading_tol: 0.6,
             yaw_decay: 0.4,
             check_horizon: 0.0,
+            target_driver: TargetDriverModel::Held,
             stop_decel_fraction: 0.7,
             road_margin: 0.2,
             obstacle_clearance: 0.5,
@@ -550,6 +567,7 @@ mod tests {
             ("[mpc]\nhorizon = 1", "horizon"),
             ("[planner]\ncheck_horizon = 1e9", "check_horizon"),
             ("[planner]\ncheck_horizon = -1.0", "check_horizon"),
+            ("[planner]\ntarget_driver = \"psychic\"", "target_driver"),
         ];
         for (text, field) in cases {
             let e = ControllerSettings::from_toml_str(text)
@@ -561,5 +579,8 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("horizn"), "{e}");
+        let s =
+            ControllerSettings::from_toml_str("[planner]\ntarget_driver = \"lane_keep\"").unwrap();
+        assert_eq!(s.planner.target_driver, TargetDriverModel::LaneKeep);
     }
 }

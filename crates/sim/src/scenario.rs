@@ -13,7 +13,7 @@
 use dynamics::params::{ParamSet, VehicleParams};
 use dynamics::plant::VehicleInit;
 use dynamics::road::{Obstacle, Road, RoadSpec, SegmentSpec};
-use dynamics::{wrap_angle, TargetState};
+use dynamics::TargetState;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use thiserror::Error;
@@ -802,11 +802,8 @@ pub struct TargetDriver {
     s_hint: f64,
 }
 
-/// Lane-keeping gains (see [`TargetDriver`]).
-pub const LANE_KEEP_KD: f64 = 0.05;
-pub const LANE_KEEP_KPSI: f64 = 0.6;
-pub const LANE_KEEP_KR: f64 = 0.1;
-pub const LANE_KEEP_MAX_STEER: f64 = 0.15;
+/// Lane-keeping gains (see [`TargetDriver`]; the law is [`dynamics::driver::LaneKeeper`]).
+pub use dynamics::driver::{LANE_KEEP_KD, LANE_KEEP_KPSI, LANE_KEEP_KR, LANE_KEEP_MAX_STEER};
 
 impl TargetDriver {
     #[must_use]
@@ -863,11 +860,12 @@ impl TargetDriver {
     fn lane_keep(&mut self, offset: f64, gain: f64, x: &TargetState, road: &Road) -> f64 {
         let f = road.project_with_hint(dynamics::geometry::Vec2::new(x[6], x[7]), self.s_hint);
         self.s_hint = f.s;
-        let e_d = f.d - offset;
-        let e_psi = wrap_angle(x[2] - f.heading);
-        let r_ref = x[0] * f.curvature;
-        let fb = -LANE_KEEP_KD * e_d - LANE_KEEP_KPSI * e_psi - LANE_KEEP_KR * (x[3] - r_ref);
-        (self.wheelbase * f.curvature + gain * fb).clamp(-LANE_KEEP_MAX_STEER, LANE_KEEP_MAX_STEER)
+        dynamics::driver::LaneKeeper {
+            offset,
+            gain,
+            wheelbase: self.wheelbase,
+        }
+        .steer(x, &f)
     }
 
     /// `(δ, T_b)` at time `t` (s) given the time of the first bullet–target contact (if
