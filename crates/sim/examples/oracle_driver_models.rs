@@ -12,6 +12,8 @@
 //! [THREADS]` (defaults 0, 128, 2; the grid of `oracle_tiers`). One `scene` line per scenario,
 //! then the shares overall and by driver.
 
+mod common;
+
 use sim::oracle::{shove_grid, DriverView, GridChoice, OracleSettings, ShoveGrid};
 use sim::DriverHypothesis;
 use std::collections::BTreeMap;
@@ -31,86 +33,27 @@ const VIEWS: [&str; 6] = [
     "mix",
 ];
 
-/// The cell whose ±1 × ±1 boxes hold the most successes summed over `grids` (ties: the
-/// earliest), among cells that succeed in at least one of them.
-fn pick_sum(grids: &[ShoveGrid]) -> Option<GridChoice> {
-    let g0 = &grids[0];
-    let mut best: Option<GridChoice> = None;
-    for it in 0..g0.times.len() {
-        for iv in 0..g0.shoves.len() {
-            for is in 0..g0.sides.len() {
-                if !grids.iter().any(|g| g.get(it as isize, is, iv as isize)) {
-                    continue;
-                }
-                let score = grids.iter().map(|g| g.box_score(it, is, iv, 1, 1)).sum();
-                if best.is_none_or(|b| score > b.score) {
-                    best = Some(GridChoice {
-                        time: it,
-                        side: is,
-                        shove: iv,
-                        score,
-                        of: 9 * grids.len(),
-                    });
-                }
-            }
-        }
-    }
-    best
-}
-
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let number = |i: usize, name: &str, default: usize| -> usize {
-        args.get(i).map_or(default, |s| {
-            s.parse().unwrap_or_else(|_| {
-                eprintln!("{name}: {s:?} is not a non-negative integer");
-                std::process::exit(2);
-            })
-        })
-    };
-    let first = number(0, "FIRST", 0);
-    let count = number(1, "COUNT", 128);
-    let threads = number(2, "THREADS", 2).max(1);
+    let first = common::number(&args, 0, "FIRST", 0);
+    let count = common::number(&args, 1, "COUNT", 128);
+    let threads = common::number(&args, 2, "THREADS", 2);
     let settings: OracleSettings = serde_json::from_str(
         r#"{"shoves":[0.4,0.5,0.63,0.8,1.0,1.25,1.6,2.0,2.5,3.15],"time_step":0.1}"#,
     )
     .expect("the built-in oracle settings parse");
-    let scenarios = sim::load_jsonl("data/scenarios.jsonl").unwrap_or_else(|e| {
-        eprintln!("{e}");
-        std::process::exit(2);
-    });
-    let chosen: Vec<_> = scenarios.iter().skip(first).take(count).collect();
+    let chosen = common::scenes(first, count);
     let t0 = std::time::Instant::now();
-    let mut results: Vec<_> = std::thread::scope(|s| {
-        let hs: Vec<_> = (0..threads)
-            .map(|w| {
-                let (chosen, settings) = (&chosen, &settings);
-                s.spawn(move || {
-                    chosen
-                        .iter()
-                        .enumerate()
-                        .filter(|(i, _)| i % threads == w)
-                        .map(|(i, sc)| {
-                            let views = [DriverView::True, DriverView::Held]
-                                .into_iter()
-                                .chain(HYPOTHESES.map(DriverView::Assume));
-                            let r: Result<Vec<ShoveGrid>, _> =
-                                views.map(|v| shove_grid(sc, settings, v)).collect();
-                            (i, r)
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        hs.into_iter()
-            .flat_map(|h| h.join().expect("oracle worker panicked"))
-            .collect()
+    let results = common::map_scenes(&chosen, threads, |sc| {
+        [DriverView::True, DriverView::Held]
+            .into_iter()
+            .chain(HYPOTHESES.map(DriverView::Assume))
+            .map(|v| shove_grid(sc, &settings, v))
+            .collect::<Result<Vec<ShoveGrid>, _>>()
     });
-    results.sort_by_key(|(i, _)| *i);
     // Per group: scenes, ideal, then per view (exact, expected).
     let mut groups: BTreeMap<String, (usize, f64, [[f64; 2]; 6])> = BTreeMap::new();
-    for (i, r) in &results {
-        let sc = chosen[*i];
+    for (sc, r) in chosen.iter().zip(&results) {
         let grids = match r {
             Ok(g) => g,
             Err(e) => {
@@ -135,7 +78,7 @@ fn main() {
         for k in 0..5 {
             v[k] = judge(grids[k + 1].most_robust(1, 1));
         }
-        v[5] = judge(pick_sum(&grids[2..]));
+        v[5] = judge(ShoveGrid::most_robust_over(&grids[2..], 1, 1));
         let ideal = f64::from(u8::from(truth.earliest().is_some()));
         println!(
             "scene {} {} {} ideal={ideal} | {}",
@@ -153,9 +96,9 @@ fn main() {
             let g = groups.entry(key).or_default();
             g.0 += 1;
             g.1 += ideal;
-            for k in 0..6 {
-                g.2[k][0] += v[k][0];
-                g.2[k][1] += v[k][1];
+            for (sum, [a, e]) in g.2.iter_mut().zip(v) {
+                sum[0] += a;
+                sum[1] += e;
             }
         }
     }

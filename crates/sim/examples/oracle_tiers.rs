@@ -19,6 +19,8 @@
 //! [SETTINGS]` (defaults 0, 192, 2, a 10-size geometric grid 0.4–3.15 m/s every 0.1 s).
 //! One `scene` line per scenario, then the shares overall and by driver and category.
 
+mod common;
+
 use sim::oracle::{shove_grid, DriverView, GridChoice, OracleSettings, ShoveGrid};
 use std::collections::BTreeMap;
 
@@ -68,17 +70,9 @@ fn tiers(truth: &ShoveGrid, held: &ShoveGrid) -> [f64; 8] {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let number = |i: usize, name: &str, default: usize| -> usize {
-        args.get(i).map_or(default, |s| {
-            s.parse().unwrap_or_else(|_| {
-                eprintln!("{name}: {s:?} is not a non-negative integer");
-                std::process::exit(2);
-            })
-        })
-    };
-    let first = number(0, "FIRST", 0);
-    let count = number(1, "COUNT", 192);
-    let threads = number(2, "THREADS", 2).max(1);
+    let first = common::number(&args, 0, "FIRST", 0);
+    let count = common::number(&args, 1, "COUNT", 192);
+    let threads = common::number(&args, 2, "THREADS", 2);
     let default = r#"{"shoves":[0.4,0.5,0.63,0.8,1.0,1.25,1.6,2.0,2.5,3.15],"time_step":0.1}"#;
     let settings: OracleSettings =
         match serde_json::from_str(args.get(3).map_or(default, String::as_str)) {
@@ -88,39 +82,14 @@ fn main() {
                 std::process::exit(2);
             }
         };
-    let scenarios = sim::load_jsonl("data/scenarios.jsonl").unwrap_or_else(|e| {
-        eprintln!("{e}");
-        std::process::exit(2);
-    });
-    let chosen: Vec<_> = scenarios.iter().skip(first).take(count).collect();
+    let chosen = common::scenes(first, count);
     let t0 = std::time::Instant::now();
-    let mut results: Vec<_> = std::thread::scope(|s| {
-        let hs: Vec<_> = (0..threads)
-            .map(|w| {
-                let (chosen, settings) = (&chosen, &settings);
-                s.spawn(move || {
-                    chosen
-                        .iter()
-                        .enumerate()
-                        .filter(|(i, _)| i % threads == w)
-                        .map(|(i, sc)| {
-                            let r = shove_grid(sc, settings, DriverView::True).and_then(|t| {
-                                shove_grid(sc, settings, DriverView::Held).map(|h| (t, h))
-                            });
-                            (i, r)
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        hs.into_iter()
-            .flat_map(|h| h.join().expect("oracle worker panicked"))
-            .collect()
+    let results = common::map_scenes(&chosen, threads, |sc| {
+        shove_grid(sc, &settings, DriverView::True)
+            .and_then(|t| shove_grid(sc, &settings, DriverView::Held).map(|h| (t, h)))
     });
-    results.sort_by_key(|(i, _)| *i);
     let mut groups: BTreeMap<String, (usize, [f64; 8])> = BTreeMap::new();
-    for (i, r) in &results {
-        let sc = chosen[*i];
+    for (sc, r) in chosen.iter().zip(&results) {
         let (truth, held) = match r {
             Ok(g) => g,
             Err(e) => {

@@ -464,15 +464,38 @@ impl ShoveGrid {
     /// most); ties go to the earliest, then the first size and side.
     #[must_use]
     pub fn most_robust(&self, radius_time: usize, radius_shove: usize) -> Option<GridChoice> {
-        let of = (2 * radius_time + 1) * (2 * radius_shove + 1);
+        Self::most_robust_over(std::slice::from_ref(self), radius_time, radius_shove)
+    }
+
+    /// The shove whose boxes hold the most successes summed over `grids` (grids of the same
+    /// shape, e.g. one per driver hypothesis), among shoves that succeed in at least one
+    /// of them; ties as [`Self::most_robust`]. `of` counts the boxes of all grids.
+    ///
+    /// # Panics
+    /// If `grids` is empty or their shapes differ (a bug of the caller).
+    #[must_use]
+    pub fn most_robust_over(
+        grids: &[ShoveGrid],
+        radius_time: usize,
+        radius_shove: usize,
+    ) -> Option<GridChoice> {
+        let g0 = &grids[0];
+        assert!(
+            grids.iter().all(|g| g.success.len() == g0.success.len()),
+            "grids of different shapes"
+        );
+        let of = (2 * radius_time + 1) * (2 * radius_shove + 1) * grids.len();
         let mut best: Option<GridChoice> = None;
-        for it in 0..self.times.len() {
-            for iv in 0..self.shoves.len() {
-                for is in 0..self.sides.len() {
-                    if !self.get(it as isize, is, iv as isize) {
+        for it in 0..g0.times.len() {
+            for iv in 0..g0.shoves.len() {
+                for is in 0..g0.sides.len() {
+                    if !grids.iter().any(|g| g.get(it as isize, is, iv as isize)) {
                         continue;
                     }
-                    let score = self.box_score(it, is, iv, radius_time, radius_shove);
+                    let score = grids
+                        .iter()
+                        .map(|g| g.box_score(it, is, iv, radius_time, radius_shove))
+                        .sum();
                     if best.is_none_or(|b| score > b.score) {
                         best = Some(GridChoice {
                             time: it,
@@ -569,5 +592,18 @@ mod tests {
         assert!(grid(["...", "...", "...", "..."])
             .most_robust(1, 1)
             .is_none());
+    }
+
+    #[test]
+    fn the_most_robust_shove_over_several_grids_sums_their_boxes() {
+        let a = grid(["..x", "..x", "...", "..."]);
+        let b = grid(["...", "x..", "x..", "x.."]);
+        // Alone, each grid's best is its own; together the sum decides, over cells that
+        // succeed in either.
+        assert_eq!(a.most_robust(1, 1).map(|c| (c.time, c.shove)), Some((0, 2)));
+        let c = ShoveGrid::most_robust_over(&[a.clone(), b.clone()], 1, 1).unwrap();
+        assert_eq!((c.time, c.shove, c.score, c.of), (2, 0, 3, 18));
+        let one = ShoveGrid::most_robust_over(std::slice::from_ref(&a), 1, 1);
+        assert_eq!(one, a.most_robust(1, 1));
     }
 }

@@ -30,8 +30,8 @@ from . import load_params_dict
 from .datagen import Dataset
 from .physics import FourDof
 from .surrogate_nn import N_IN, N_OUT, GatherMLP, dense_mlp
-from .train import (LOSS_SCALES, Split, TrainError, evaluate, fit, physics_targets, plot_curves, prepare,
-                    supervised_loss, torch_threads, weight_norm)
+from .train import (LOSS_SCALES, Split, TrainError, evaluate, fit, one_step_loss, physics_targets, plot_curves,
+                    prepare, supervised_loss, torch_threads, weight_norm)
 
 
 @dataclass
@@ -257,8 +257,7 @@ def compress(teacher: GatherMLP, ds: Dataset, cfg: CompressConfig, out: Path,
         ow = ow / ow.mean()
 
     def distil_loss(idx, _widx):
-        e = ((student(z_all[idx]) - y_teacher[idx]) / student.out_std) ** 2
-        l = (e if ow is None else e * ow).mean()
+        l = one_step_loss(student, z_all[idx], y_teacher[idx], weights=ow)
         pen = weight_norm(student)
         total = l + cfg.norm_penalty * pen
         return total, {"teacher": float(l.detach()), "norm": float(pen.detach()), "total": float(total.detach())}
