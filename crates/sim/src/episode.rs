@@ -182,8 +182,12 @@ impl Uncertainty {
 pub struct EpisodeConfig {
     /// Name in reports (`4dof`, `pinn`, `picopinn`, `picopinn_no_upper`, …).
     pub name: String,
-    /// The controller's target surrogate (planner and MPC alike).
+    /// The controller's target surrogate (planner and MPC alike, unless `planner_model`).
     pub model: ModelKind,
+    /// The upper layer's surrogate when it differs from `model`, which then serves the MPC
+    /// only: a diagnostic of which layer a surrogate's accuracy matters in
+    /// (`docs/RESULTS.md`). `None` (the default): `model`.
+    pub planner_model: Option<ModelKind>,
     /// Folder of the model files: `<models_dir>/<params>/{pinn,picopinn}.safetensors`.
     pub models_dir: PathBuf,
     /// A model file to use instead (for every parameter set).
@@ -202,6 +206,7 @@ impl Default for EpisodeConfig {
         Self {
             name: "picopinn".to_owned(),
             model: ModelKind::PicoPinn,
+            planner_model: None,
             models_dir: PathBuf::from("models"),
             model_path: None,
             controller: ControllerSettings::default(),
@@ -524,21 +529,24 @@ pub fn run_episode(
     Ok(r)
 }
 
-/// Load one target model for the controller.
+/// Load one target model for the controller: the MPC's (`planner = false`) or the upper
+/// layer's. `model_path` replaces the file of `config.model` only.
 fn load_model(
     config: &EpisodeConfig,
     sc: &Scenario,
     params: &ParamSet,
     dt: f64,
+    planner: bool,
 ) -> Result<Box<dyn TargetModel + Send + Sync>, EpisodeError> {
-    target_model(
-        config.model,
-        &config.models_dir,
-        config.model_path.as_deref(),
-        sc,
-        params,
-        dt,
-    )
+    let kind = match config.planner_model {
+        Some(k) if planner => k,
+        _ => config.model,
+    };
+    let path = config
+        .model_path
+        .as_deref()
+        .filter(|_| kind == config.model);
+    target_model(kind, &config.models_dir, path, sc, params, dt)
 }
 
 /// The controller's target model of kind `model` for scenario `sc` (its parameter set and
@@ -592,8 +600,8 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         settings.planner.qp.time_limit = 1.0e6;
     }
     let dt = settings.mpc.dt;
-    let mpc_model = load_model(config, sc, &params, dt)?;
-    let planner_model = load_model(config, sc, &params, dt)?;
+    let mpc_model = load_model(config, sc, &params, dt, false)?;
+    let planner_model = load_model(config, sc, &params, dt, true)?;
     let mut ctl = PitController::new(&params, sc.mu, mpc_model, planner_model, settings)
         .map_err(|e| EpisodeError::Controller(e.to_string()))?;
     if config.clock == ClockKind::Simulated {

@@ -190,3 +190,41 @@ fn a_missing_model_file_is_an_error_naming_it() {
         other => panic!("expected a model error, got {other:?}"),
     }
 }
+
+#[test]
+fn the_upper_layer_can_get_its_own_model() {
+    let sc = scenario(r#"{"kind":"lane_keep","offset":3.5,"gain":1.0}"#, 1.0);
+    let missing = |model: &str, planner: &str| {
+        let mut cfg = config(model);
+        cfg.planner_model = Some(EpisodeConfig::parse(planner).unwrap().model);
+        cfg.models_dir = PathBuf::from("/nonexistent/models");
+        match run_episode(&sc, &cfg, 0) {
+            Err(EpisodeError::Model { path, .. }) => path,
+            other => panic!("expected a model error, got {other:?}"),
+        }
+    };
+    // The MPC's model is loaded first; with the 4-DOF model there the planner's file is
+    // the one that is missing.
+    assert!(missing("4dof", "pinn").ends_with("full_size/pinn.safetensors"));
+    assert!(missing("picopinn", "4dof").ends_with("full_size/picopinn.safetensors"));
+    // Naming the same model for the planner changes nothing.
+    let strip = |mut r: sim::EpisodeResult| {
+        r.wall_time = 0.0;
+        r
+    };
+    let mut same = config("4dof");
+    same.planner_model = Some(ModelKind::FourDof);
+    assert_eq!(
+        strip(run_episode(&sc, &config("4dof"), 0).unwrap()),
+        strip(run_episode(&sc, &same, 0).unwrap())
+    );
+    let c = EpisodeConfig::parse(r#"{"preset": "picopinn", "planner_model": "4dof"}"#).unwrap();
+    assert_eq!(
+        (c.model, c.planner_model),
+        (ModelKind::PicoPinn, Some(ModelKind::FourDof))
+    );
+    assert_eq!(
+        config_error(r#"{"planner_model": "5dof"}"#).0,
+        "planner_model"
+    );
+}
