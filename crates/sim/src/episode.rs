@@ -468,6 +468,42 @@ pub fn phase_index(p: Phase) -> f64 {
     }
 }
 
+/// One plan of a recorded episode: what the upper layer predicted when it planned, to set
+/// against what then happened (`examples/plan_calibration`).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct PlanRecord {
+    /// When the plan was made (s).
+    pub time: f64,
+    pub mode: planner::Mode,
+    /// The reversed heading ψ_rev of the plan's terminal set (rad).
+    pub reversed_heading: f64,
+    /// The plan's predicted heading error at the end of its look-ahead (rad).
+    pub predicted_heading_error: f64,
+    /// Per plan step: its start time (s), the predicted target `[vx, vy, ψ, r, p, φ, X, Y]`
+    /// at that time and the planned virtual force `[F_n, F_t]` over the step (N).
+    pub predicted: Vec<(f64, [f64; 8], [f64; 2])>,
+}
+
+impl PlanRecord {
+    fn of(p: &planner::DecisionPackage) -> Self {
+        Self {
+            time: p.time,
+            mode: p.mode,
+            reversed_heading: p.terminal.heading,
+            predicted_heading_error: p.predicted_heading_error,
+            predicted: p
+                .steps
+                .iter()
+                .map(|s| {
+                    let mut x = [0.0; 8];
+                    x.copy_from_slice(s.target.as_slice());
+                    (s.time, x, [s.force.x, s.force.y])
+                })
+                .collect(),
+        }
+    }
+}
+
 /// Everything one episode produced.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct EpisodeResult {
@@ -500,6 +536,8 @@ pub struct EpisodeResult {
     pub ctrl_times_ms: Vec<f64>,
     /// One sample per control step when recording.
     pub trajectory: Vec<Sample>,
+    /// Every plan of the upper layer when recording.
+    pub plans: Vec<PlanRecord>,
 }
 
 impl EpisodeResult {
@@ -619,6 +657,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
     let mut plan_times = Vec::new();
     let mut ctrl_times = Vec::with_capacity(n_steps as usize);
     let mut trajectory = Vec::new();
+    let mut plans = Vec::new();
     let mut stabilising_reported = false;
     let (mut mpc_failures, mut mpc_time_budget) = (0u32, 0u32);
     let mut phase = ctl.phase();
@@ -649,6 +688,9 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         steps += 1;
         if out.replanned {
             plan_times.push(out.plan_time * 1e3);
+            if config.record {
+                plans.extend(ctl.package().map(PlanRecord::of));
+            }
         }
         if let Some(st) = out.mpc_status {
             ctrl_times.push(out.ctrl_time * 1e3);
@@ -714,6 +756,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         plan_times_ms: plan_times,
         ctrl_times_ms: ctrl_times,
         trajectory,
+        plans,
     })
 }
 

@@ -20,7 +20,8 @@ pub mod screen;
 pub mod vehicle;
 
 pub use episode::{
-    run_episode, ClockKind, EpisodeConfig, EpisodeError, EpisodeResult, ModelKind, Uncertainty,
+    run_episode, ClockKind, EpisodeConfig, EpisodeError, EpisodeResult, ModelKind, PlanRecord,
+    Uncertainty,
 };
 pub use oracle::{
     ideal_pit, shove_grid, DriverView, GridChoice, OracleReport, OracleSettings, ShoveGrid,

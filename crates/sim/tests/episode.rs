@@ -228,3 +228,39 @@ fn the_upper_layer_can_get_its_own_model() {
         "planner_model"
     );
 }
+
+#[test]
+fn a_recorded_episode_keeps_every_plan_starting_from_the_true_state() {
+    let sc = scenario(r#"{"kind":"lane_keep","offset":3.5,"gain":1.0}"#, 1.5);
+    let mut cfg = config("4dof");
+    let r = run_episode(&sc, &cfg, 0).unwrap();
+    assert!(r.plans.is_empty(), "not recorded unless asked");
+    cfg.record = true;
+    let r = run_episode(&sc, &cfg, 0).unwrap();
+    assert_eq!(r.plans.len(), r.plan_times_ms.len(), "one record per plan");
+    assert!(!r.plans.is_empty());
+    let dt = cfg.controller.mpc.dt;
+    for p in &r.plans {
+        assert!(!p.predicted.is_empty() && p.predicted_heading_error.is_finite());
+        for (k, (t, x, f)) in p.predicted.iter().enumerate() {
+            assert!((t - p.time - k as f64 * dt).abs() < 1e-9, "step {k} at {t}");
+            assert!(x.iter().chain(f.iter()).all(|v| v.is_finite()));
+            assert!(f[0] >= 0.0, "a push, never a pull");
+        }
+        // Without sensing noise the plan starts from the plant's state at its time (the
+        // sample at the end of the previous step), or from the initial state.
+        let (_, x0, _) = p.predicted[0];
+        match r.trajectory.iter().find(|s| (s.time - p.time).abs() < 1e-9) {
+            Some(s) => {
+                for (a, b) in x0.iter().zip(&s.target) {
+                    assert!(
+                        (a - b).abs() <= 1e-9 * (1.0 + b.abs()),
+                        "{x0:?} vs {:?}",
+                        s.target
+                    );
+                }
+            }
+            None => assert!(p.time < 1e-9, "plan at {} without a sample", p.time),
+        }
+    }
+}
