@@ -7,18 +7,17 @@
 //! [SETTINGS]` (defaults 0, all, data/scenarios.jsonl, 2, `{}`; SETTINGS is JSON of
 //! `sim::OracleSettings`, e.g. `'{"shoves":[0.5,1,1.5,2,2.5,3],"time_step":0.1}'`).
 
+mod common;
+
 use sim::oracle::{ideal_pit, OracleSettings};
 use std::collections::BTreeMap;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let first: usize = args.first().and_then(|s| s.parse().ok()).unwrap_or(0);
-    let count: usize = args
-        .get(1)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(usize::MAX);
+    let first = common::number(&args, 0, "FIRST", 0);
+    let count = common::number(&args, 1, "COUNT", usize::MAX);
     let file = args.get(2).map_or("data/scenarios.jsonl", String::as_str);
-    let threads: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(2).max(1);
+    let threads = common::number(&args, 3, "THREADS", 2);
     let scenarios = match sim::load_jsonl(file) {
         Ok(s) => s,
         Err(e) => {
@@ -26,7 +25,7 @@ fn main() {
             std::process::exit(2);
         }
     };
-    let chosen: Vec<_> = scenarios.iter().skip(first).take(count).collect();
+    let chosen: Vec<_> = scenarios.into_iter().skip(first).take(count).collect();
     let settings: OracleSettings =
         match serde_json::from_str(args.get(4).map_or("{}", String::as_str)) {
             Ok(s) => s,
@@ -36,31 +35,10 @@ fn main() {
             }
         };
     let t0 = std::time::Instant::now();
-    let mut results: Vec<_> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|w| {
-                let chosen = &chosen;
-                let settings = &settings;
-                s.spawn(move || {
-                    chosen
-                        .iter()
-                        .enumerate()
-                        .filter(|(i, _)| i % threads == w)
-                        .map(|(i, sc)| (i, ideal_pit(sc, settings)))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("oracle worker panicked"))
-            .collect()
-    });
-    results.sort_by_key(|(i, _)| *i);
+    let results = common::map_scenes(&chosen, threads, |sc| ideal_pit(sc, &settings));
     let mut groups: BTreeMap<String, (usize, usize)> = BTreeMap::new();
     let mut total = (0, 0);
-    for (i, r) in &results {
-        let sc = chosen[*i];
+    for (sc, r) in chosen.iter().zip(&results) {
         let r = match r {
             Ok(r) => r,
             Err(e) => {

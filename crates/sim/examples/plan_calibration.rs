@@ -11,7 +11,6 @@
 //! all PIT plans and for those made in contact. The truth includes how well the MPC
 //! executed the plan, so read the models against each other, not alone; the last table
 //! sets the plan's normal force over its first 0.5 s against the contact force delivered.
-#[path = "common/mod.rs"]
 mod common;
 
 use sim::episode::{run_episode, EpisodeConfig};

@@ -1,4 +1,6 @@
-//! What the oracle examples share: numeric arguments and a scene-parallel map.
+//! What the scene examples share: numeric arguments, the scene loader and a scene-parallel
+//! map (each example uses some of them).
+#![allow(dead_code)]
 
 use sim::Scenario;
 
