@@ -69,7 +69,12 @@ def main() -> None:
         # runs never cross an episode: the step index restarts at 0
         report(f"{d} (train split)", runs(force, a["step"]))
     if args.closed_loop:
-        first, stop, step = (int(v) for v in args.scenes.split(":"))
+        try:
+            first, stop, step = (int(v) for v in args.scenes.split(":"))
+            if min(first, stop, step) < 0 or step == 0:
+                raise ValueError
+        except ValueError:
+            ap.error(f"--scenes {args.scenes!r}: expected FIRST:STOP:STEP, non-negative integers, STEP > 0")
         lines = Path(args.scenarios).read_text().splitlines()[first:stop:step]
         jobs = [(l, args.closed_loop, args.models) for l in lines if '"full_size"' in l]
         with ProcessPoolExecutor(2) as ex:
@@ -78,4 +83,11 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from picopit import ModelError
+    from picopit.datagen import DatasetError
+    from picopit.surrogate_nn import ModelFileError
+
+    try:
+        main()
+    except (DatasetError, ModelError, ModelFileError, OSError) as e:
+        raise SystemExit(f"{Path(__file__).name}: {e}")

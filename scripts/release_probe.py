@@ -60,4 +60,11 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from picopit import ModelError
+    from picopit.datagen import DatasetError
+    from picopit.surrogate_nn import ModelFileError
+
+    try:
+        main()
+    except (DatasetError, ModelError, ModelFileError, OSError) as e:
+        raise SystemExit(f"{Path(__file__).name}: {e}")

@@ -92,7 +92,7 @@ def _datagen_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
     p.add_argument("--sustained", type=float, default=None, metavar="F",
                    help="fraction of the episodes with a sustained push instead of a hit "
-                        "(default %(default_sustained)s)" % {"default_sustained": _default_sustained()})
+                        f"(default {_default_sustained()})")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_datagen)
