@@ -22,7 +22,7 @@ use crate::scenario::{ParamSetName, Scenario, ScenarioError};
 use crate::vehicle::{bullet_array, SimVehicle};
 use dynamics::params::ParamSet;
 use dynamics::target4dof::FourDofTarget;
-use dynamics::{TargetInput, TargetModel};
+use dynamics::{ContactInput, TargetInput, TargetModel};
 use mpc::{MpcStatus, TickClock};
 use planner::{AbortReason, ControllerInput, ControllerSettings, Phase, PitController};
 use rand::{RngCore, SeedableRng};
@@ -386,6 +386,13 @@ pub struct Sample {
     pub target_command: [f64; 2],
     /// Contact force `[F_n, F_t]` averaged over the step (N; zero apart).
     pub contact_force: [f64; 2],
+    /// The averaged contact's normal, world heading γ (rad), and its point of action in the
+    /// target's body frame relative to its c.g. (m): with `contact_force` the
+    /// [`ContactInput`] a target model takes for the step (zeros apart).
+    #[serde(default)]
+    pub contact_gamma: f64,
+    #[serde(default)]
+    pub contact_point: [f64; 2],
     pub phase: Phase,
     pub replanned: bool,
     /// Planning and control times of the step (ms).
@@ -482,10 +489,20 @@ pub struct PlanRecord {
     /// Per plan step: its start time (s), the predicted target `[vx, vy, ψ, r, p, φ, X, Y]`
     /// at that time and the planned virtual force `[F_n, F_t]` over the step (N).
     pub predicted: Vec<(f64, [f64; 8], [f64; 2])>,
+    /// The pushed side's sign (left +1, right −1): the planned force's normal is the
+    /// target's side normal, world heading ψ − sign·π/2.
+    #[serde(default)]
+    pub side_sign: f64,
+    /// The planned point of action in the target's body frame, relative to its c.g. (m).
+    #[serde(default)]
+    pub contact_point: [f64; 2],
+    /// The target driver's command `[δ, T_b]` the plan held.
+    #[serde(default)]
+    pub target_input: [f64; 2],
 }
 
 impl PlanRecord {
-    fn of(p: &planner::DecisionPackage) -> Self {
+    fn of(p: &planner::DecisionPackage, target_input: [f64; 2]) -> Self {
         Self {
             time: p.time,
             mode: p.mode,
@@ -500,6 +517,9 @@ impl PlanRecord {
                     (s.time, x, [s.force.x, s.force.y])
                 })
                 .collect(),
+            side_sign: p.side.sign(),
+            contact_point: [p.contact_point.x, p.contact_point.y],
+            target_input,
         }
     }
 }
@@ -689,7 +709,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         if out.replanned {
             plan_times.push(out.plan_time * 1e3);
             if config.record {
-                plans.extend(ctl.package().map(PlanRecord::of));
+                plans.extend(ctl.package().map(|p| PlanRecord::of(p, [t_steer, t_brake])));
             }
         }
         if let Some(st) = out.mpc_status {
@@ -711,19 +731,14 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         }
         if let Status::Done(_) = status {
             if config.record {
-                trajectory.push(sample(&vehicle, &out, [0.0; 2], t));
+                trajectory.push(sample(&vehicle, &out, None, t));
             }
             break;
         }
         vehicle.actuate([out.command[0], out.command[1]]);
         status = vehicle.advance();
         if config.record {
-            trajectory.push(sample(
-                &vehicle,
-                &out,
-                vehicle.contact_force(),
-                vehicle.time(),
-            ));
+            trajectory.push(sample(&vehicle, &out, vehicle.contact(), vehicle.time()));
         }
         if let Status::Done(_) = status {
             break;
@@ -768,9 +783,10 @@ fn ns_time(t: f64) -> f64 {
 fn sample(
     vehicle: &SimVehicle,
     out: &planner::ControllerOutput,
-    contact_force: [f64; 2],
+    contact: Option<ContactInput>,
     time: f64,
 ) -> Sample {
+    let c = contact.unwrap_or_else(ContactInput::none);
     let plant = vehicle.plant();
     let xt = plant.target_state();
     let mut target = [0.0; 8];
@@ -781,7 +797,9 @@ fn sample(
         bullet: bullet_array(plant),
         command: [out.command[0], out.command[1]],
         target_command: vehicle.target_command(),
-        contact_force,
+        contact_force: [c.fc.x, c.fc.y],
+        contact_gamma: c.gamma,
+        contact_point: [c.point_in_body.x, c.point_in_body.y],
         phase: out.phase,
         replanned: out.replanned,
         plan_ms: out.plan_time * 1e3,

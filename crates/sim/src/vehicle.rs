@@ -18,7 +18,7 @@ use crate::scenario::{Scenario, TargetDriver};
 use dynamics::params::ParamSet;
 use dynamics::plant::{Plant, PlantConfig};
 use dynamics::road::{Obstacle, Road};
-use dynamics::TargetState;
+use dynamics::{ContactInput, TargetState};
 use rand::{Rng, RngCore};
 use std::collections::VecDeque;
 
@@ -135,7 +135,7 @@ pub struct SimVehicle {
     first_contact: Option<f64>,
     target_command: [f64; 2],
     applied: [f64; 2],
-    contact_force: [f64; 2],
+    contact: Option<ContactInput>,
     status: Status,
 }
 
@@ -200,7 +200,7 @@ impl SimVehicle {
             first_contact: None,
             target_command: [0.0; 2],
             applied: [0.0; 2],
-            contact_force: [0.0; 2],
+            contact: None,
             status: Status::Running,
         })
     }
@@ -271,10 +271,11 @@ impl SimVehicle {
             self.sensor
                 .push(self.plant.target_state(), bullet_array(&self.plant));
         }
-        self.contact_force = self
-            .plant
-            .take_contact_average()
-            .map_or([0.0; 2], |c| [c.fc.x, c.fc.y]);
+        self.contact = self.plant.take_contact_average().map(|c| ContactInput {
+            fc: c.fc,
+            gamma: c.gamma,
+            point_in_body: c.point_in_target,
+        });
         self.status = self.monitor.observe_plant(&self.plant);
         self.status
     }
@@ -348,7 +349,15 @@ impl SimVehicle {
     /// The mean bullet–target contact force `[F_n, F_t]` over the last period (0 apart).
     #[must_use]
     pub fn contact_force(&self) -> [f64; 2] {
-        self.contact_force
+        self.contact.map_or([0.0; 2], |c| [c.fc.x, c.fc.y])
+    }
+
+    /// The bullet–target contact averaged over the last period as the target model's input
+    /// (`None` apart): `dynamics::Plant::take_contact_average` with the point in the
+    /// target's body frame.
+    #[must_use]
+    pub fn contact(&self) -> Option<ContactInput> {
+        self.contact
     }
 
     /// Time of the first bullet–target contact (s).

@@ -264,3 +264,84 @@ fn a_recorded_episode_keeps_every_plan_starting_from_the_true_state() {
         }
     }
 }
+
+/// A recorded episode keeps the contact as a target model takes it (force, normal and
+/// point, the point on the target's side), and each plan keeps what its rollout used
+/// (side, contact point, the driver's held command): the plan's own model, replayed from
+/// its start with those, reproduces its prediction.
+#[test]
+fn a_recorded_plan_replays_exactly_and_the_contact_lies_on_the_targets_side() {
+    use dynamics::geometry::Vec2;
+    use dynamics::{ContactInput, TargetInput, TargetState};
+    let sc = scenario(r#"{"kind":"none","steer":0.0}"#, 4.0);
+    let mut cfg = config("4dof");
+    cfg.record = true;
+    let r = run_episode(&sc, &cfg, 0).unwrap();
+    let params = sc.params.load().unwrap();
+    let t = &params.target;
+    let dt = cfg.controller.mpc.dt;
+    let touching: Vec<_> = r
+        .trajectory
+        .iter()
+        .filter(|s| s.contact_force[0] > 0.0)
+        .collect();
+    assert!(!touching.is_empty(), "the episode pushes: {:?}", r.metrics);
+    for s in &touching {
+        let [x, y] = s.contact_point;
+        assert!(
+            x > -(t.length - t.cg_to_front) - 0.05 && x < t.cg_to_front + 0.05,
+            "point x {x} off the body"
+        );
+        assert!(
+            (y.abs() - 0.5 * t.width).abs() < 0.15,
+            "point y {y} off the side"
+        );
+        // The normal runs from the bullet into the target, across the target's side.
+        let side_normal = s.target[2] - y.signum() * std::f64::consts::FRAC_PI_2;
+        let d = (s.contact_gamma - side_normal)
+            .sin()
+            .atan2((s.contact_gamma - side_normal).cos());
+        assert!(
+            d.abs() < 0.5,
+            "normal {} against the side's {side_normal}",
+            s.contact_gamma
+        );
+    }
+    for s in r.trajectory.iter().filter(|s| s.contact_force[0] == 0.0) {
+        assert_eq!((s.contact_gamma, s.contact_point), (0.0, [0.0; 2]));
+    }
+    let mut model =
+        sim::episode::target_model(ModelKind::FourDof, &cfg.models_dir, None, &sc, &params, dt)
+            .unwrap();
+    let pits: Vec<_> = r
+        .plans
+        .iter()
+        .filter(|p| p.mode == planner::Mode::Pit)
+        .collect();
+    assert!(!pits.is_empty());
+    for p in pits {
+        assert_eq!(p.side_sign.abs(), 1.0);
+        assert_eq!(p.contact_point[1].signum(), p.side_sign);
+        let mut x = TargetState::from_column_slice(&p.predicted[0].1);
+        let u = TargetInput::new(p.target_input[0], p.target_input[1]);
+        for k in 0..p.predicted.len() - 1 {
+            let f = p.predicted[k].2;
+            let c = if f == [0.0; 2] {
+                ContactInput::none()
+            } else {
+                ContactInput {
+                    fc: Vec2::new(f[0], f[1]),
+                    gamma: x[2] - p.side_sign * std::f64::consts::FRAC_PI_2,
+                    point_in_body: Vec2::new(p.contact_point[0], p.contact_point[1]),
+                }
+            };
+            x = model.step(&x, &u, &c);
+            let want = TargetState::from_column_slice(&p.predicted[k + 1].1);
+            assert!(
+                (x - want).amax() <= 1e-9 * (1.0 + want.amax()),
+                "plan at {} step {k}: {x:?} vs {want:?}",
+                p.time
+            );
+        }
+    }
+}
