@@ -21,7 +21,7 @@
 //! after construction.
 
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
-use crate::settings::{length_scale, PlannerSettings, TargetDriverModel};
+use crate::settings::{length_scale, ContactPointModel, PlannerSettings, TargetDriverModel};
 use dynamics::bullet::BulletState;
 use dynamics::driver::LaneKeeper;
 use dynamics::geometry::{rotate, Obb, Pose2, Vec2};
@@ -334,6 +334,33 @@ impl Planner {
         (rear_quarter_x(&self.params) + offset).clamp(rear, t.cg_to_front - clear)
     }
 
+    /// Where the bullet touches the target now, as the contact point's body x (clamped as
+    /// [`Self::contact_x_at`]), when a plan in contact puts its force there
+    /// (`contact_point_in_contact = touch`) and the footprints are within 0.1 m (× the
+    /// length scale); `None` otherwise.
+    fn touch_x(&self, xt: &TargetState, xb: &BulletState) -> Option<f64> {
+        if self.settings.contact_point_in_contact != ContactPointModel::Touch {
+            return None;
+        }
+        let b = &self.params.bullet;
+        let fb = Obb::vehicle_footprint(
+            &Pose2::new(xb[0], xb[1], xb[2]),
+            b.length,
+            b.width,
+            b.cg_to_front,
+        );
+        let g = pair_geometry(&fb, &self.footprint(xt));
+        if g.gap >= 0.1 * self.len_scale {
+            return None;
+        }
+        let t = &self.params.target;
+        let clear = 0.2 * self.len_scale;
+        let x = Pose2::new(xt[idx::X], xt[idx::Y], xt[idx::PSI])
+            .body_from_world(g.point_b)
+            .x;
+        Some(x.clamp(-(t.length - t.cg_to_front) + clear, t.cg_to_front - clear))
+    }
+
     /// Earliest time (s from now) the bullet can be at its contact pose on `side`: a simple
     /// approach model (closing on the target as `PlannerSettings::closing_time`, moving across at
     /// `lateral_speed` at the same time, plus a settling time); crossing behind the target to the other side
@@ -452,6 +479,7 @@ impl Planner {
                 continue;
             }
             let t_arr = self.earliest_arrival(side, &input.target, &input.bullet);
+            let touch_x = self.touch_x(&input.target, &input.bullet);
             // In contact already: the window starts now.
             let offsets = if t_arr == 0.0 {
                 1
@@ -465,7 +493,7 @@ impl Planner {
                     continue;
                 }
                 candidates += 1;
-                self.contact_x = self.contact_x_at(0.0);
+                self.contact_x = touch_x.unwrap_or_else(|| self.contact_x_at(0.0));
                 if let Some(o) = self.evaluate(side, k0, lane, input) {
                     self.rank(o, &mut best, &mut best_any, &mut feasible);
                 }

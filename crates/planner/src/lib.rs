@@ -27,5 +27,5 @@ pub use package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 pub use phase::{AbortReason, Phase, PhaseMachine, PhaseObservation};
 pub use settings::{
     length_scale, ControllerSettings, PhaseSettings, PlanWeights, PlannerSettings, SettingsError,
-    TargetDriverModel, TUNED_BULLET_LENGTH,
+    ContactPointModel, TargetDriverModel, TUNED_BULLET_LENGTH,
 };

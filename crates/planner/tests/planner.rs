@@ -8,7 +8,9 @@ use dynamics::road::{Obstacle, Road};
 use dynamics::target4dof::FourDofTarget;
 use dynamics::{TargetInput, TargetState};
 use planner::decision::wrap;
-use planner::{DecisionPackage, Infeasible, Mode, Planner, PlannerInput, PlannerSettings};
+use planner::{
+    ContactPointModel, DecisionPackage, Infeasible, Mode, Planner, PlannerInput, PlannerSettings,
+};
 
 fn params() -> ParamSet {
     ParamSet::builtin("full_size").unwrap()
@@ -267,4 +269,57 @@ fn bad_input_is_an_error_not_a_panic() {
         p.plan(&input(&road, &many, xt, xb)).unwrap_err(),
         planner::PlanError::TooManyObstacles
     );
+}
+
+/// A plan made while the bullet touches the target puts its force at the rear-quarter
+/// point by default, and where the footprints touch with `contact_point_in_contact = touch`
+/// (the bullet's inner front corner here, 0.9 m ahead of the rear quarter).
+#[test]
+fn a_plan_in_contact_can_push_where_the_bullet_touches() {
+    let p = params();
+    let road = road();
+    let (mut xt, _) = states(&road, -6.0, 3.0, 20.0, 21.0);
+    xt[0] = 20.0;
+    let x_rq = mpc::reference::rear_quarter_x(&p);
+    let x_touch = x_rq + 0.9;
+    // The bullet on the target's left, turned in by 12° as in a PIT, its inner front corner
+    // 2 cm into the target's side at x_touch (the contact pose of `mpc::reference`).
+    let pose = mpc::reference::pit_stage_at(
+        &p,
+        mpc::Side::Left,
+        x_touch,
+        12f64.to_radians(),
+        0.02,
+        1.0,
+        (0.0, 1.0),
+    );
+    let xb = BulletState::from_column_slice(&[
+        xt[6] + pose.rel_pos.x,
+        xt[7] + pose.rel_pos.y,
+        pose.rel_heading,
+        21.0,
+        0.0,
+        0.0,
+    ]);
+    for (model, want, tol) in [
+        (ContactPointModel::RearQuarter, x_rq, 1e-9),
+        (ContactPointModel::Touch, x_touch, 0.05),
+    ] {
+        let settings = PlannerSettings {
+            contact_point_in_contact: model,
+            ..PlannerSettings::default()
+        };
+        let mut pl = planner(settings);
+        let mut inp = input(&road, &[], xt, xb);
+        inp.side = Some(mpc::Side::Left);
+        inp.best_effort = true;
+        let pkg = pl.plan(&inp).unwrap();
+        assert_eq!(pkg.mode, Mode::Pit, "{model:?}: {pkg:?}");
+        assert!(
+            (pkg.contact_point.x - want).abs() <= tol,
+            "{model:?}: contact point x {} against {want}",
+            pkg.contact_point.x
+        );
+        assert!(pkg.contact_point.y > 0.0, "left side");
+    }
 }
