@@ -29,7 +29,7 @@ use dynamics::params::ParamSet;
 use dynamics::road::{Obstacle, Road};
 use dynamics::target::idx;
 use dynamics::{ContactInput, TargetInput, TargetJacobians, TargetModel, TargetState};
-use mpc::geom::{edge_row, gap_gradient, pair_geometry};
+use mpc::geom::{edge_row, gap_gradient, pair_geometry, PairGeometry};
 use mpc::qp::{clarabel_settings, Emitter, Pattern, Qp};
 use mpc::reference::{pit_stage_at, rear_quarter_x};
 use mpc::{QpStatus, Side};
@@ -325,40 +325,34 @@ impl Planner {
         )
     }
 
-    /// The contact point's body x for offset `offset` from the rear quarter (clamped to the
-    /// target's side, at least 0.2 m (full size; × the length scale) from either bumper).
+    /// The contact point's body x for offset `offset` from the rear quarter (clamped as
+    /// [`Self::clamp_contact_x`]).
     fn contact_x_at(&self, offset: f64) -> f64 {
-        let t = &self.params.target;
-        let clear = 0.2 * self.len_scale;
-        let rear = -(t.length - t.cg_to_front) + clear;
-        (rear_quarter_x(&self.params) + offset).clamp(rear, t.cg_to_front - clear)
+        self.clamp_contact_x(rear_quarter_x(&self.params) + offset)
     }
 
-    /// Where the bullet touches the target now, as the contact point's body x (clamped as
-    /// [`Self::contact_x_at`]), when a plan in contact puts its force there
-    /// (`contact_point_in_contact = touch`) and the footprints are within 0.1 m (× the
-    /// length scale); `None` otherwise.
-    fn touch_x(&self, xt: &TargetState, xb: &BulletState) -> Option<f64> {
-        if self.settings.contact_point_in_contact != ContactPointModel::Touch {
-            return None;
-        }
-        let b = &self.params.bullet;
-        let fb = Obb::vehicle_footprint(
-            &Pose2::new(xb[0], xb[1], xb[2]),
-            b.length,
-            b.width,
-            b.cg_to_front,
-        );
-        let g = pair_geometry(&fb, &self.footprint(xt));
-        if g.gap >= 0.1 * self.len_scale {
-            return None;
-        }
+    /// A contact point's body x clamped to the target's side, at least 0.2 m (full size;
+    /// × the length scale) from either bumper.
+    fn clamp_contact_x(&self, x: f64) -> f64 {
         let t = &self.params.target;
         let clear = 0.2 * self.len_scale;
+        x.clamp(-(t.length - t.cg_to_front) + clear, t.cg_to_front - clear)
+    }
+
+    /// Where the bullet touches the target now (`pair`: the footprints' geometry, bullet
+    /// first), as the contact point's body x (clamped as [`Self::clamp_contact_x`]), when a
+    /// plan in contact puts its force there (`contact_point_in_contact = touch`) and the
+    /// footprints are within 0.1 m (× the length scale); `None` otherwise.
+    fn touch_x(&self, pair: &PairGeometry, xt: &TargetState) -> Option<f64> {
+        if self.settings.contact_point_in_contact != ContactPointModel::Touch
+            || pair.gap >= 0.1 * self.len_scale
+        {
+            return None;
+        }
         let x = Pose2::new(xt[idx::X], xt[idx::Y], xt[idx::PSI])
-            .body_from_world(g.point_b)
+            .body_from_world(pair.point_b)
             .x;
-        Some(x.clamp(-(t.length - t.cg_to_front) + clear, t.cg_to_front - clear))
+        Some(self.clamp_contact_x(x))
     }
 
     /// Earliest time (s from now) the bullet can be at its contact pose on `side`: a simple
@@ -471,6 +465,10 @@ impl Planner {
                 Side::Right => &[Side::Right],
             },
         };
+        // Where the vehicles touch, if they do: the contact point of a plan in contact.
+        let pair = self.pair(&input.target, &input.bullet);
+        let touching = pair.gap < 0.1 * self.len_scale;
+        let touch_x = self.touch_x(&pair, &input.target);
         for &side in sides {
             // No room for the bullet beside the target on this side: not a candidate (a
             // committed side in contact is kept).
@@ -479,7 +477,6 @@ impl Planner {
                 continue;
             }
             let t_arr = self.earliest_arrival(side, &input.target, &input.bullet);
-            let touch_x = self.touch_x(&input.target, &input.bullet);
             // In contact already: the window starts now.
             let offsets = if t_arr == 0.0 {
                 1
@@ -502,7 +499,6 @@ impl Planner {
         // The contact point along the rear quarter: the other offsets, tried on the best
         // side and window only (one more candidate each); not while in contact, where the
         // contact point is wherever the bullet touches.
-        let touching = self.gap(&input.target, &input.bullet) < 0.1 * self.len_scale;
         if let Some(o) = best.or(best_any).filter(|_| !touching) {
             for i in 0..self.settings.contact_offsets.len() {
                 let off = self.settings.contact_offsets[i];
@@ -798,6 +794,11 @@ impl Planner {
 
     /// Signed distance between the two vehicles' footprints (m).
     fn gap(&self, xt: &TargetState, xb: &BulletState) -> f64 {
+        self.pair(xt, xb).gap
+    }
+
+    /// The two vehicles' footprint geometry (bullet first).
+    fn pair(&self, xt: &TargetState, xb: &BulletState) -> PairGeometry {
         let b = &self.params.bullet;
         let fb = Obb::vehicle_footprint(
             &Pose2::new(xb[0], xb[1], xb[2]),
@@ -805,7 +806,7 @@ impl Planner {
             b.width,
             b.cg_to_front,
         );
-        pair_geometry(&fb, &self.footprint(xt)).gap
+        pair_geometry(&fb, &self.footprint(xt))
     }
 
     fn footprint(&self, x: &TargetState) -> Obb {

@@ -21,8 +21,7 @@
 //! force's size and its geometry (point and normal) are swapped one at a time.
 mod common;
 
-use dynamics::geometry::Vec2;
-use dynamics::{ContactInput, TargetInput, TargetModel, TargetState};
+use dynamics::{TargetInput, TargetModel, TargetState};
 use sim::episode::{run_episode, target_model, EpisodeConfig, PlanRecord, Sample};
 use sim::EpisodeResult;
 
@@ -141,17 +140,6 @@ struct Replay {
     plan_mismatch: f64,
 }
 
-fn contact_of(side_sign: f64, point: [f64; 2], f: [f64; 2], psi: f64) -> ContactInput {
-    if f[0] <= 0.0 && f[1] == 0.0 {
-        return ContactInput::none();
-    }
-    ContactInput {
-        fc: Vec2::new(f[0], f[1]),
-        gamma: psi - side_sign * std::f64::consts::FRAC_PI_2,
-        point_in_body: Vec2::new(point[0], point[1]),
-    }
-}
-
 fn replay_plan(model: &mut dyn TargetModel, p: &PlanRecord, steps: &[&Sample], out: &mut Replay) {
     let k_max = REPLAY_HORIZONS[1];
     if steps.len() < k_max || p.predicted.len() <= k_max {
@@ -164,24 +152,15 @@ fn replay_plan(model: &mut dyn TargetModel, p: &PlanRecord, steps: &[&Sample], o
             let planned = p.predicted[k].2;
             let psi = x[2];
             let c = match (size_delivered, geometry_delivered) {
-                (false, false) => contact_of(p.side_sign, p.contact_point, planned, psi),
-                (true, true) => {
-                    if s.contact_force[0] > 0.0 {
-                        ContactInput {
-                            fc: Vec2::new(s.contact_force[0], s.contact_force[1]),
-                            gamma: s.contact_gamma,
-                            point_in_body: Vec2::new(s.contact_point[0], s.contact_point[1]),
-                        }
-                    } else {
-                        ContactInput::none()
-                    }
-                }
-                (true, false) => contact_of(p.side_sign, p.contact_point, s.contact_force, psi),
+                (false, false) => p.contact_with(planned, psi),
+                (true, true) => s.contact(),
+                (true, false) => p.contact_with(s.contact_force, psi),
                 (false, true) => {
-                    let mut c = contact_of(p.side_sign, p.contact_point, planned, psi);
+                    let mut c = p.contact_with(planned, psi);
                     if s.contact_force[0] > 0.0 && c.fc.x > 0.0 {
-                        c.gamma = s.contact_gamma;
-                        c.point_in_body = Vec2::new(s.contact_point[0], s.contact_point[1]);
+                        let d = s.contact();
+                        c.gamma = d.gamma;
+                        c.point_in_body = d.point_in_body;
                     }
                     c
                 }

@@ -20,6 +20,7 @@
 use crate::outcome::{FailureCause, Metrics, Outcome, Status};
 use crate::scenario::{ParamSetName, Scenario, ScenarioError};
 use crate::vehicle::{bullet_array, SimVehicle};
+use dynamics::geometry::Vec2;
 use dynamics::params::ParamSet;
 use dynamics::target4dof::FourDofTarget;
 use dynamics::{ContactInput, TargetInput, TargetModel};
@@ -431,6 +432,19 @@ impl Sample {
         "decided",
     ];
 
+    /// The contact averaged over the step as the target model's input (none apart).
+    #[must_use]
+    pub fn contact(&self) -> ContactInput {
+        if self.contact_force[0] <= 0.0 {
+            return ContactInput::none();
+        }
+        ContactInput {
+            fc: Vec2::new(self.contact_force[0], self.contact_force[1]),
+            gamma: self.contact_gamma,
+            point_in_body: Vec2::new(self.contact_point[0], self.contact_point[1]),
+        }
+    }
+
     /// The sample as numbers in [`Sample::COLUMNS`] order (phase as its index: chasing 0,
     /// PIT 1, stabilising 2, done 3, aborted 4; `decided` is filled by the caller).
     #[must_use]
@@ -502,6 +516,21 @@ pub struct PlanRecord {
 }
 
 impl PlanRecord {
+    /// The target model's contact input for a force `f = [F_n, F_t]` on the plan's side and
+    /// contact point with the target at heading `psi` (the normal is the side normal, as the
+    /// planner's rollout has it); no contact for a zero force.
+    #[must_use]
+    pub fn contact_with(&self, f: [f64; 2], psi: f64) -> ContactInput {
+        if f == [0.0; 2] {
+            return ContactInput::none();
+        }
+        ContactInput {
+            fc: Vec2::new(f[0], f[1]),
+            gamma: psi - self.side_sign * std::f64::consts::FRAC_PI_2,
+            point_in_body: Vec2::new(self.contact_point[0], self.contact_point[1]),
+        }
+    }
+
     fn of(p: &planner::DecisionPackage, target_input: [f64; 2]) -> Self {
         Self {
             time: p.time,

@@ -271,8 +271,7 @@ fn a_recorded_episode_keeps_every_plan_starting_from_the_true_state() {
 /// its start with those, reproduces its prediction.
 #[test]
 fn a_recorded_plan_replays_exactly_and_the_contact_lies_on_the_targets_side() {
-    use dynamics::geometry::Vec2;
-    use dynamics::{ContactInput, TargetInput, TargetState};
+    use dynamics::{TargetInput, TargetState};
     let sc = scenario(r#"{"kind":"none","steer":0.0}"#, 4.0);
     let mut cfg = config("4dof");
     cfg.record = true;
@@ -326,15 +325,7 @@ fn a_recorded_plan_replays_exactly_and_the_contact_lies_on_the_targets_side() {
         let u = TargetInput::new(p.target_input[0], p.target_input[1]);
         for k in 0..p.predicted.len() - 1 {
             let f = p.predicted[k].2;
-            let c = if f == [0.0; 2] {
-                ContactInput::none()
-            } else {
-                ContactInput {
-                    fc: Vec2::new(f[0], f[1]),
-                    gamma: x[2] - p.side_sign * std::f64::consts::FRAC_PI_2,
-                    point_in_body: Vec2::new(p.contact_point[0], p.contact_point[1]),
-                }
-            };
+            let c = p.contact_with(f, x[2]);
             x = model.step(&x, &u, &c);
             let want = TargetState::from_column_slice(&p.predicted[k + 1].1);
             assert!(
