@@ -66,6 +66,10 @@ pub enum PlanError {
     NonFiniteState,
     #[error("planner input: more than {MAX_OBSTACLES} obstacles")]
     TooManyObstacles,
+    #[error(
+        "planner input: more forces than the window has steps, or a window past the look-ahead"
+    )]
+    TooManyForces,
 }
 
 /// Construction errors.
@@ -92,6 +96,25 @@ struct Outcome {
     stop_margin: f64,
     /// Least road margin of the free slide after the look-ahead (`check_horizon`).
     slide_margin: f64,
+}
+
+/// How the upper layer judges a given push ([`Planner::judge`]): the plan's own terminal
+/// and safety criteria on its rollout, without optimising anything.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Judgement {
+    /// `|wrap(ψ_N + τ r_N − ψ_rev)|` at the end of the look-ahead (rad).
+    pub heading_error: f64,
+    /// Least road margin of the footprint over the look-ahead, beyond `road_margin` (m).
+    pub road_margin: f64,
+    /// Least obstacle gap over the look-ahead (m).
+    pub clearance: f64,
+    /// Road margin of the predicted stopping point (m).
+    pub stop_margin: f64,
+    /// Least road margin of the free slide after the look-ahead (`check_horizon`; +∞ off).
+    pub slide_margin: f64,
+    /// Whether a candidate with this outcome would be feasible (in the terminal set, inside
+    /// the road, clear of obstacles, each within `violation_tol`).
+    pub feasible: bool,
 }
 
 /// The upper layer: owns its target model, its QP and every buffer.
@@ -390,11 +413,11 @@ impl Planner {
         best_any: &mut Option<Outcome>,
         feasible: &mut u32,
     ) {
-        let heading_ok = o.heading_error <= self.settings.heading_tol;
-        let tol = self.settings.violation_tol;
-        let road_ok = o.road_margin >= -tol && o.stop_margin >= -tol && o.slide_margin >= -tol;
-        let obs_ok = o.clearance >= self.settings.obstacle_clearance - tol;
-        if heading_ok && road_ok && obs_ok {
+        if self.acceptable(
+            o.heading_error,
+            [o.road_margin, o.stop_margin, o.slide_margin],
+            o.clearance,
+        ) {
             *feasible += 1;
             if best.is_none_or(|b| o.objective < b.objective) {
                 *best = Some(o);
@@ -404,6 +427,76 @@ impl Planner {
             *best_any = Some(o);
             self.best.copy_from_slice(&self.forces);
         }
+    }
+
+    /// The feasibility test of a candidate: terminal heading within `heading_tol`, road,
+    /// stopping-point and free-slide margins and obstacle clearance within
+    /// `violation_tol`.
+    fn acceptable(&self, heading_error: f64, margins: [f64; 3], clearance: f64) -> bool {
+        let tol = self.settings.violation_tol;
+        heading_error <= self.settings.heading_tol
+            && margins.iter().all(|&m| m >= -tol)
+            && clearance >= self.settings.obstacle_clearance - tol
+    }
+
+    /// Judge a given push on the plan's criteria, without optimising it: the forces
+    /// `forces[j] = [F_n, F_t]` (N) act over plan steps `start + j` (at most the window's
+    /// steps; the rest of the window is free) on `side` at the rear-quarter point, the
+    /// target's driver as the settings say. The planner's package is left as it was. For
+    /// diagnostics (`examples/oracle_surrogate`: which single shoves the upper layer would
+    /// call feasible).
+    ///
+    /// # Errors
+    /// [`PlanError`] for bad input, and [`PlanError::TooManyForces`] for more forces than
+    /// the window has steps, or a window past the look-ahead.
+    pub fn judge(
+        &mut self,
+        input: &PlannerInput<'_>,
+        side: Side,
+        start: usize,
+        forces: &[Vec2],
+    ) -> Result<Judgement, PlanError> {
+        if input.target.iter().any(|v| !v.is_finite())
+            || input.target_input.iter().any(|v| !v.is_finite())
+            || forces.iter().any(|f| !f.x.is_finite() || !f.y.is_finite())
+        {
+            return Err(PlanError::NonFiniteState);
+        }
+        if input.obstacles.len() > MAX_OBSTACLES {
+            return Err(PlanError::TooManyObstacles);
+        }
+        if forces.len() > self.w || start + self.w > self.n {
+            return Err(PlanError::TooManyForces);
+        }
+        self.time = input.time;
+        self.input_u = input.target_input;
+        self.lane_keeper = self.driver_model(input);
+        self.contact_x = self.contact_x_at(0.0);
+        let lane = input
+            .road
+            .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
+            .heading;
+        self.setup_candidate(side, start, lane);
+        self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
+        self.forces[..forces.len()].copy_from_slice(forces);
+        self.rollout(Some(input.road), &input.target, false, false);
+        self.linearise_rows(input.road, input.obstacles);
+        let (_, _, road_margin, clearance, stop_margin) = self.merit(false);
+        let heading_error =
+            projected_heading_error(&self.xs[self.n], self.settings.yaw_decay, self.psi_rev);
+        let slide_margin = self.slide_margin(input.road);
+        Ok(Judgement {
+            heading_error,
+            road_margin,
+            clearance,
+            stop_margin,
+            slide_margin,
+            feasible: self.acceptable(
+                heading_error,
+                [road_margin, stop_margin, slide_margin],
+                clearance,
+            ),
+        })
     }
 
     /// Plan from the current state: search the candidates and fill the package.
@@ -438,12 +531,8 @@ impl Planner {
             self.rollout(Some(input.road), &input.target, false, false);
             self.linearise_rows(input.road, input.obstacles);
             let (_, heading_error, road_margin, clearance, stop_margin) = self.merit(false);
-            let tol = self.settings.violation_tol;
-            if heading_error <= self.settings.heading_tol
-                && road_margin >= -tol
-                && stop_margin >= -tol
-                && clearance >= self.settings.obstacle_clearance - tol
-            {
+            // (The free slide is not asked of a push already done.)
+            if self.acceptable(heading_error, [road_margin, stop_margin, 0.0], clearance) {
                 self.package.candidates = 0;
                 self.package.feasible_candidates = 0;
                 self.fill_package(Mode::Stabilise, None, None, lane, input);

@@ -22,10 +22,10 @@ pub mod settings;
 pub use controller::{
     ControllerError, ControllerInput, ControllerOutput, PitController, StepError,
 };
-pub use decision::{PlanError, Planner, PlannerError, PlannerInput, MAX_OBSTACLES};
+pub use decision::{Judgement, PlanError, Planner, PlannerError, PlannerInput, MAX_OBSTACLES};
 pub use package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 pub use phase::{AbortReason, Phase, PhaseMachine, PhaseObservation};
 pub use settings::{
-    length_scale, ControllerSettings, PhaseSettings, PlanWeights, PlannerSettings, SettingsError,
-    ContactPointModel, TargetDriverModel, TUNED_BULLET_LENGTH,
+    length_scale, ContactPointModel, ControllerSettings, PhaseSettings, PlanWeights,
+    PlannerSettings, SettingsError, TargetDriverModel, TUNED_BULLET_LENGTH,
 };

@@ -323,3 +323,64 @@ fn a_plan_in_contact_can_push_where_the_bullet_touches() {
         assert!(pkg.contact_point.y > 0.0, "left side");
     }
 }
+
+/// `Planner::judge` is the plan's own verdict: judging the push a plan chose (its side,
+/// window and forces) gives that plan's predicted heading error back and calls it feasible;
+/// no push leaves a target driving straight on far from its reversed heading; a harder
+/// shove turns it further; a bad push is an error.
+#[test]
+fn judging_a_plans_own_push_gives_its_verdict() {
+    let s = PlannerSettings {
+        contact_offsets: vec![0.0],
+        ..PlannerSettings::default()
+    };
+    let road = road();
+    let mut p = planner(s.clone());
+    let (xt, xb) = states(&road, -5.0, 2.5, 15.0, 17.0);
+    let inp = input(&road, &[], xt, xb);
+    let pkg = p.plan(&inp).unwrap().clone();
+    assert_eq!(pkg.mode, Mode::Pit, "{:?}", pkg.infeasible);
+    let start = ((pkg.window.0 - pkg.time) / s.dt).round() as usize;
+    let forces: Vec<_> = pkg.steps[start..start + s.window_steps()]
+        .iter()
+        .map(|st| st.force)
+        .collect();
+    let j = p.judge(&inp, pkg.side, start, &forces).unwrap();
+    assert!(
+        (j.heading_error - pkg.predicted_heading_error).abs() < 1e-9,
+        "judged {} against planned {}",
+        j.heading_error,
+        pkg.predicted_heading_error
+    );
+    assert!(j.feasible, "{j:?}");
+    // The package is the plan's, whatever was judged since.
+    assert_eq!(p.package(), &pkg);
+
+    let none = p.judge(&inp, pkg.side, 0, &[]).unwrap();
+    assert!(!none.feasible && none.heading_error > 3.0, "{none:?}");
+    let m = params().target.mass;
+    let shove = |dv: f64| [dynamics::geometry::Vec2::new(m * dv / 0.15, 0.0); 3];
+    let (weak, hard) = (
+        p.judge(&inp, pkg.side, 0, &shove(0.3)).unwrap(),
+        p.judge(&inp, pkg.side, 0, &shove(1.5)).unwrap(),
+    );
+    assert!(
+        hard.heading_error < weak.heading_error && weak.heading_error < none.heading_error,
+        "none {none:?}, weak {weak:?}, hard {hard:?}"
+    );
+
+    let too_long = vec![dynamics::geometry::Vec2::zeros(); s.window_steps() + 1];
+    assert_eq!(
+        p.judge(&inp, pkg.side, 0, &too_long).unwrap_err(),
+        planner::PlanError::TooManyForces
+    );
+    assert_eq!(
+        p.judge(&inp, pkg.side, s.steps(), &shove(1.0)).unwrap_err(),
+        planner::PlanError::TooManyForces
+    );
+    let nan = [dynamics::geometry::Vec2::new(f64::NAN, 0.0)];
+    assert_eq!(
+        p.judge(&inp, pkg.side, 0, &nan).unwrap_err(),
+        planner::PlanError::NonFiniteState
+    );
+}

@@ -24,5 +24,11 @@ fn main() {
             s.time, s.phase, fb.s - ft.s, ft.d, (s.target[2]-ft.heading).to_degrees(), s.target[0].hypot(s.target[1]),
             fb.d, (s.bullet[2]-fb.heading).to_degrees(), s.bullet[3], s.command[0], s.command[1], s.contact_force[0]);
     }
+    for p in &r.plans {
+        println!(
+            "plan t={:5.2} {:?} predicted heading error {:5.2} rad",
+            p.time, p.mode, p.predicted_heading_error
+        );
+    }
     println!("{:?} half width {:.2}", r.metrics, road.half_width());
 }

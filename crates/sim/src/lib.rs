@@ -24,7 +24,8 @@ pub use episode::{
     Uncertainty,
 };
 pub use oracle::{
-    ideal_pit, shove_grid, DriverView, GridChoice, OracleReport, OracleSettings, ShoveGrid,
+    ideal_pit, shove_grid, shove_states, DriverView, GridChoice, OracleReport, OracleSettings,
+    ShoveGrid, ShoveState,
 };
 pub use outcome::{FailureCause, JudgeSettings, Metrics, Monitor, Observation, Outcome, Status};
 pub use scenario::{

@@ -546,6 +546,46 @@ pub fn shove_grid(
     Ok(grid)
 }
 
+/// The target at one candidate shove time of a [`ShoveGrid`], as a planner would see it.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct ShoveState {
+    /// The candidate time (s), as in [`ShoveGrid::times`].
+    pub time: f64,
+    /// The true target state `[vx, vy, ψ, r, p, φ, X, Y]` then (no contact before it).
+    pub target: [f64; 8],
+    /// The driver's command `[δ, T_b]` then (what [`DriverView::Held`] holds).
+    pub command: [f64; 2],
+}
+
+/// The target's state and its driver's command at every candidate shove time of
+/// [`shove_grid`] with the same settings, in the grid's time order: what a chooser that
+/// sees the state and the current command (a planner) decides from.
+///
+/// # Errors
+/// As [`ideal_pit`].
+pub fn shove_states(
+    sc: &Scenario,
+    settings: &OracleSettings,
+) -> Result<Vec<ShoveState>, ScenarioError> {
+    let snaps = Snapshots::new(sc, settings)?;
+    Ok(snaps
+        .candidates(sc, settings)
+        .map(|snap| {
+            let x = snap.plant.target_state();
+            let t = snap.time();
+            // (The driver keeps state: ask a copy, as `try_shove` asks its copy of the run.)
+            let (steer, brake) = snap.driver.clone().command(t, None, &x, &snap.road);
+            let mut target = [0.0; 8];
+            target.copy_from_slice(x.as_slice());
+            ShoveState {
+                time: t,
+                target,
+                command: [steer, brake],
+            }
+        })
+        .collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

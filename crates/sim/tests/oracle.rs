@@ -3,7 +3,7 @@
 
 mod common;
 
-use sim::oracle::{ideal_pit, shove_grid, DriverView, OracleSettings};
+use sim::oracle::{ideal_pit, shove_grid, shove_states, DriverView, OracleSettings};
 use sim::scenario::Scenario;
 
 fn scenario(v: &serde_json::Value) -> Scenario {
@@ -166,4 +166,32 @@ fn the_right_driver_hypothesis_is_the_truth() {
         truth.success, release.success,
         "the lane keeper's steer matters"
     );
+}
+
+/// What a chooser sees at each candidate time (`shove_states`) lines up with the grid: one
+/// state per grid time, in order; the target drives on between them at its speed; and a
+/// lane keeper on its own lane's centre, undisturbed, is not steering.
+#[test]
+fn the_chooser_sees_one_state_per_grid_time() {
+    let sc = scenario(&common::straight());
+    let s = shoves(&[1.0]);
+    let g = shove_grid(&sc, &s, DriverView::Held).unwrap();
+    let states = shove_states(&sc, &s).unwrap();
+    assert!(states.len() > 10);
+    assert_eq!(
+        states.iter().map(|x| x.time).collect::<Vec<_>>(),
+        g.times,
+        "one state per grid time"
+    );
+    for w in states.windows(2) {
+        let dt = w[1].time - w[0].time;
+        let dx = w[1].target[6] - w[0].target[6];
+        let v = 0.5 * (w[0].target[0] + w[1].target[0]);
+        assert!(
+            (dx - v * dt).abs() < 0.02 * v * dt,
+            "dx {dx} against v dt {}",
+            v * dt
+        );
+        assert!(w[0].command[0].abs() < 1e-3, "steer {:?}", w[0].command);
+    }
 }
