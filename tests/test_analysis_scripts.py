@@ -1,0 +1,57 @@
+"""The analysis scripts over example outputs: scripts/oracle_surrogate.py counts what the
+lines say and refuses a malformed file naming the line."""
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "scripts" / "oracle_surrogate.py"
+
+LINES = [
+    "scene sc-00001 curved lane_keep low ideal=1 | 4dof first=1 robust=1 exp=0.67 both=10 "
+    "model_only=10 truth_only=0 | picopinn first=0 robust=0 exp=0.00 both=0 model_only=5 "
+    "truth_only=10",
+    "scene sc-00002 straight_urban none high ideal=1 | 4dof first=0 robust=1 exp=0.33 both=0 "
+    "model_only=30 truth_only=10 | picopinn first=1 robust=1 exp=1.00 both=10 model_only=0 "
+    "truth_only=0",
+    "some other line the example prints",
+]
+
+
+def run(*args):
+    return subprocess.run([sys.executable, str(SCRIPT), *map(str, args)],
+                          capture_output=True, text=True)
+
+
+def test_oracle_surrogate_tables_count_the_lines(tmp_path):
+    log = tmp_path / "surrogate.txt"
+    log.write_text("\n".join(LINES) + "\n")
+    episodes = tmp_path / "episodes.txt"
+    episodes.write_text(
+        "sc-00001 curved low success at 12.00 s | …\n"
+        "sc-00002 straight_urban high boundary_violation Target at 5.00 s | …\n")
+    r = run(log, "--episodes", episodes, "--model", "picopinn")
+    assert r.returncode == 0, r.stderr
+    rows = {}  # the first row of each label: the choices' table, then the closed loop's
+    for l in r.stdout.splitlines():
+        if l.startswith("| "):
+            rows.setdefault(l.split("|")[1].strip(), [c.strip() for c in l.split("|")[2:-1]])
+    # all: n, ideal, 4dof first / robust / exp, picopinn first / robust / exp
+    assert rows["**all**"][:8] == ["2", "100.0 %", "50.0 %", "100.0 %", "50.0 %", "50.0 %",
+                                   "50.0 %", "50.0 %"]
+    assert rows["adhesion low"][:3] == ["1", "100.0 %", "100.0 %"]
+    # 4dof: both 10, called 50, works 20; picopinn: both 10, called 15, works 20.
+    verdict = [l for l in r.stdout.splitlines() if l.startswith("| **all** |")][1]
+    assert [c.strip() for c in verdict.split("|")[2:-1]] == ["20.0 %", "50.0 %", "66.7 %", "50.0 %"]
+    # PicoPINN's first shove works in sc-00002 only, which the closed loop lost.
+    assert rows["works"] == ["1", "0"] and rows["fails or none"] == ["1", "1"]
+
+
+def test_oracle_surrogate_refuses_a_malformed_line(tmp_path):
+    log = tmp_path / "bad.txt"
+    log.write_text(LINES[0] + "\nscene sc-00003 curved\n")
+    r = run(log)
+    assert r.returncode == 1
+    assert "line 2" in r.stderr and r.stdout == ""
+    r = run(tmp_path / "missing.txt")
+    assert r.returncode == 1 and "missing.txt" in r.stderr
