@@ -429,6 +429,20 @@ impl Planner {
         }
     }
 
+    /// Take the call's time, the target driver's command and its model, and the
+    /// rear-quarter contact point; return the heading of the road at the target (the
+    /// reversed heading's reference).
+    fn begin(&mut self, input: &PlannerInput<'_>) -> f64 {
+        self.time = input.time;
+        self.input_u = input.target_input;
+        self.lane_keeper = self.driver_model(input);
+        self.contact_x = self.contact_x_at(0.0);
+        input
+            .road
+            .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
+            .heading
+    }
+
     /// The feasibility test of a candidate: terminal heading within `heading_tol`, road,
     /// stopping-point and free-slide margins and obstacle clearance within
     /// `violation_tol`.
@@ -468,14 +482,7 @@ impl Planner {
         if forces.len() > self.w || start + self.w > self.n {
             return Err(PlanError::TooManyForces);
         }
-        self.time = input.time;
-        self.input_u = input.target_input;
-        self.lane_keeper = self.driver_model(input);
-        self.contact_x = self.contact_x_at(0.0);
-        let lane = input
-            .road
-            .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
-            .heading;
+        let lane = self.begin(input);
         self.setup_candidate(side, start, lane);
         self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
         self.forces[..forces.len()].copy_from_slice(forces);
@@ -513,14 +520,7 @@ impl Planner {
         if input.obstacles.len() > MAX_OBSTACLES {
             return Err(PlanError::TooManyObstacles);
         }
-        self.time = input.time;
-        self.input_u = input.target_input;
-        self.lane_keeper = self.driver_model(input);
-        self.contact_x = self.contact_x_at(0.0);
-        let lane = input
-            .road
-            .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
-            .heading;
+        let lane = self.begin(input);
         // The target reverses without further push (a PIT under way that has done its
         // work, or a target spinning out by itself): the decision is to stop pushing. The
         // package still reports the predicted margins.
@@ -674,14 +674,7 @@ impl Planner {
         if input.obstacles.len() > MAX_OBSTACLES {
             return Err(PlanError::TooManyObstacles);
         }
-        self.time = input.time;
-        self.input_u = input.target_input;
-        self.lane_keeper = self.driver_model(input);
-        self.contact_x = self.contact_x_at(0.0);
-        let lane = input
-            .road
-            .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
-            .heading;
+        let lane = self.begin(input);
         let side = self.bullet_side(input);
         self.setup_candidate(side, self.n, lane);
         self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());

@@ -30,7 +30,7 @@ mod common;
 
 use dynamics::geometry::Vec2;
 use dynamics::{TargetInput, TargetState};
-use planner::{ControllerSettings, Planner, PlannerInput, PlannerSettings};
+use planner::{Planner, PlannerInput, PlannerSettings};
 use sim::episode::{target_model, ModelKind};
 use sim::oracle::{shove_grid, shove_states, DriverView, GridChoice, OracleSettings, ShoveGrid};
 use std::path::Path;
@@ -141,30 +141,21 @@ fn verdict(truth: &ShoveGrid, view: &ShoveGrid) -> Verdict {
     v
 }
 
-/// The default planner settings with the JSON object `text`'s fields over them (exit code 2
-/// naming the problem).
+/// The planner settings of the JSON object `text` (fields left out take their defaults;
+/// exit code 2 naming the problem).
 fn planner_settings(text: &str) -> PlannerSettings {
-    let over: serde_json::Value = serde_json::from_str(text).unwrap_or_else(|e| {
+    let fail = |e: &dyn std::fmt::Display| -> ! {
         eprintln!("PLANNER: {e}");
         std::process::exit(2);
-    });
-    let mut base = serde_json::to_value(ControllerSettings::default().planner)
-        .expect("the planner settings serialise");
-    if let (Some(b), Some(o)) = (base.as_object_mut(), over.as_object()) {
-        for (k, v) in o {
-            b.insert(k.clone(), v.clone());
-        }
-    } else {
-        eprintln!("PLANNER: not a JSON object: {text}");
-        std::process::exit(2);
+    };
+    let value: serde_json::Value = serde_json::from_str(text).unwrap_or_else(|e| fail(&e));
+    if !value.is_object() {
+        // (serde would read a JSON array as the fields in order.)
+        fail(&format!("not a JSON object: {text}"));
     }
-    let s: PlannerSettings = serde_json::from_value(base).unwrap_or_else(|e| {
-        eprintln!("PLANNER: {e}");
-        std::process::exit(2);
-    });
+    let s: PlannerSettings = serde_json::from_value(value).unwrap_or_else(|e| fail(&e));
     if let Err(e) = s.validate() {
-        eprintln!("PLANNER: {e}");
-        std::process::exit(2);
+        fail(&e);
     }
     s
 }
