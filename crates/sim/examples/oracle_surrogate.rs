@@ -176,8 +176,15 @@ fn main() {
             })
         })
         .collect();
-    let steps = common::number(&args, 4, "STEPS", 3).max(1);
+    let steps = common::number(&args, 4, "STEPS", 3);
     let planner_settings = planner_settings(args.get(5).map_or("{}", String::as_str));
+    if steps == 0 || steps > planner_settings.window_steps() {
+        eprintln!(
+            "STEPS: {steps} is not within 1..={} (the planner's window)",
+            planner_settings.window_steps()
+        );
+        std::process::exit(2);
+    }
     let cache = args.get(6).map(Path::new);
     if let Some(c) = cache {
         if let Err(e) = std::fs::create_dir_all(c) {
