@@ -54,8 +54,18 @@ fn truth_grid(
     cache: Option<&Path>,
 ) -> Result<ShoveGrid, String> {
     let file = cache.map(|c| c.join(format!("{}.json", sc.id)));
-    if let Some(Ok(text)) = file.as_ref().map(std::fs::read_to_string) {
-        return serde_json::from_str(&text).map_err(|e| format!("{}: {e}", sc.id));
+    if let (Some(f), Some(Ok(text))) = (&file, file.as_ref().map(std::fs::read_to_string)) {
+        let g: ShoveGrid =
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", f.display()))?;
+        // A grid kept by a build with another shove grid would be judged against the
+        // wrong shoves: refuse it rather than read it.
+        if g.shoves != settings.shoves || g.sides != settings.sides {
+            return Err(format!(
+                "{}: kept with other shoves or sides than this grid's; remove it",
+                f.display()
+            ));
+        }
+        return Ok(g);
     }
     let g = shove_grid(sc, settings, DriverView::True).map_err(|e| e.to_string())?;
     if let Some(f) = file {
