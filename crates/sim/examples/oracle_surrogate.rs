@@ -54,7 +54,7 @@ fn truth_grid(
     cache: Option<&Path>,
 ) -> Result<ShoveGrid, String> {
     let file = cache.map(|c| c.join(format!("{}.json", sc.id)));
-    if let (Some(f), Some(Ok(text))) = (&file, file.as_ref().map(std::fs::read_to_string)) {
+    if let Some((f, Ok(text))) = file.as_ref().map(|f| (f, std::fs::read_to_string(f))) {
         let g: ShoveGrid =
             serde_json::from_str(&text).map_err(|e| format!("{}: {e}", f.display()))?;
         // A grid kept by a build with another shove grid would be judged against the

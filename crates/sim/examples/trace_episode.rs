@@ -2,6 +2,8 @@
 //! phase, the command and the contact force), then its metrics.
 //!
 //! `cargo run --release -p picopit-sim --example trace_episode -- ID [CONFIG]`
+mod common;
+
 use sim::episode::{run_episode, EpisodeConfig};
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -25,10 +27,7 @@ fn main() {
             fb.d, (s.bullet[2]-fb.heading).to_degrees(), s.bullet[3], s.command[0], s.command[1], s.contact_force[0]);
     }
     for p in &r.plans {
-        println!(
-            "plan t={:5.2} {:?} predicted heading error {:5.2} rad",
-            p.time, p.mode, p.predicted_heading_error
-        );
+        println!("{}", common::plan_line(p, cfg.controller.planner.dt));
     }
     println!("{:?} half width {:.2}", r.metrics, road.half_width());
 }

@@ -12,6 +12,8 @@
 //!
 //! Set `TRACE=ID` to print that case step by step. The clock is simulated (reproducible).
 
+mod common;
+
 use sim::episode::{run_episode, ClockKind, EpisodeConfig, Uncertainty};
 
 fn main() {
@@ -110,17 +112,7 @@ fn main() {
                 );
             }
             for pl in &r.plans {
-                // The planned push: the first and last steps with force, and its peak.
-                let pushed: Vec<_> = pl.predicted.iter().filter(|p| p.2[0] > 0.0).collect();
-                let window = match (pushed.first(), pushed.last()) {
-                    (Some(a), Some(b)) => format!("{:.2}–{:.2} s", a.0, b.0 + 0.05),
-                    _ => "none".to_owned(),
-                };
-                let peak = pushed.iter().map(|p| p.2[0]).fold(0.0, f64::max);
-                println!(
-                    "  plan t={:5.2} {:?} push {window} peak {peak:.0} N, predicted heading error {:.2} rad",
-                    pl.time, pl.mode, pl.predicted_heading_error
-                );
+                println!("  {}", common::plan_line(pl, c.controller.planner.dt));
             }
             println!("  {m:?}, half width {:.2}", road.half_width());
         }

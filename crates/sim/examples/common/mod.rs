@@ -2,6 +2,7 @@
 //! map (each example uses some of them).
 #![allow(dead_code)]
 
+use sim::episode::PlanRecord;
 use sim::Scenario;
 
 /// The `i`-th argument as a non-negative integer, `default` when absent; anything else
@@ -13,6 +14,22 @@ pub fn number(args: &[String], i: usize, name: &str, default: usize) -> usize {
             std::process::exit(2);
         })
     })
+}
+
+/// One line on a recorded plan: its time and mode, the span of plan steps with a planned
+/// push (`dt`: the plan's step) and the push's peak normal force, and the predicted
+/// heading error.
+pub fn plan_line(p: &PlanRecord, dt: f64) -> String {
+    let pushed: Vec<_> = p.predicted.iter().filter(|s| s.2[0] > 0.0).collect();
+    let window = match (pushed.first(), pushed.last()) {
+        (Some(a), Some(b)) => format!("{:.2}–{:.2} s", a.0, b.0 + dt),
+        _ => "none".to_owned(),
+    };
+    let peak = pushed.iter().map(|s| s.2[0]).fold(0.0, f64::max);
+    format!(
+        "plan t={:5.2} {:?} push {window} peak {peak:.0} N, predicted heading error {:5.2} rad",
+        p.time, p.mode, p.predicted_heading_error
+    )
 }
 
 /// Scenes `first .. first + count` of `data/scenarios.jsonl` (exit code 2 if it does not
