@@ -324,6 +324,17 @@ impl PitController {
             if pkg.mode == Mode::Stabilise {
                 self.phases.stabilise(input.time);
             }
+            // Once the push has turned the target, a replan that finds no push meeting the
+            // terminal set ends it: the planner's best effort would keep pressing on a
+            // spinning target (`PhaseSettings::let_go_turn`).
+            if let (Phase::Pit, Mode::Pit, Some(frame)) = (phase, pkg.mode, self.pit_frame) {
+                if pkg.infeasible.is_some()
+                    && self.phases.contacted()
+                    && wrap(input.target[idx::PSI] - frame).abs() > self.settings.phases.let_go_turn
+                {
+                    self.phases.stabilise(input.time);
+                }
+            }
             let period = if phase == Phase::Pit {
                 self.settings.planner.replan_period_pit
             } else {

@@ -412,6 +412,12 @@ pub struct PhaseSettings {
     pub release_dwell: f64,
     /// The PIT ends once the target has turned this far (rad) since the push began.
     pub pit_yaw_done: f64,
+    /// The PIT also ends when, after a contact and once the target has turned this far
+    /// (rad) since the push began, a replan finds no push that meets the terminal set: the
+    /// bullet lets go instead of pressing on with the planner's best effort (pressing on
+    /// into a spinning target is what ends in unsafe rebounds; docs/RESULTS.md). Above π it
+    /// never applies.
+    pub let_go_turn: f64,
     /// The target counts as settled below this speed (m/s) and yaw rate (rad/s).
     pub settle_speed: f64,
     pub settle_yaw_rate: f64,
@@ -439,6 +445,7 @@ impl Default for PhaseSettings {
             release_gap: 0.2,
             release_dwell: 0.15,
             pit_yaw_done: 1.05,
+            let_go_turn: 0.35,
             settle_speed: 0.5,
             settle_yaw_rate: 0.1,
             bullet_yaw_rate_max: 1.5,
@@ -479,6 +486,7 @@ impl PhaseSettings {
             ("phases.contact_gap", self.contact_gap),
             ("phases.monitor_speed", self.monitor_speed),
             ("phases.bullet_clearance_min", self.bullet_clearance_min),
+            ("phases.let_go_turn", self.let_go_turn),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(name, format!("must be finite and >= 0 (got {v})")));

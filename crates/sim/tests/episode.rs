@@ -336,3 +336,45 @@ fn a_recorded_plan_replays_exactly_and_the_contact_lies_on_the_targets_side() {
         }
     }
 }
+
+/// The first time (s) the recorded episode is in `phase`.
+fn first_in(r: &sim::EpisodeResult, phase: planner::Phase) -> Option<f64> {
+    r.trajectory
+        .iter()
+        .find(|s| s.phase == phase)
+        .map(|s| s.time)
+}
+
+/// `sc-00034` with the PicoPINN in both layers: after the first impact the target spins
+/// (44° turned at 3.85 s), the in-contact replan finds no push that meets the reversal
+/// (its best misses by 2.3 rad: the PicoPINN has the spun target slide on at 3.7 m/s
+/// after 2 s, the plant 1.3), and a bullet that presses on with that plan is still faster
+/// than the target when the PIT ends and runs into it (an unsafe rebound at 4.46 s). With
+/// `let_go_turn` the bullet lets go at that replan and the target settles reversed.
+#[test]
+fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenarios.jsonl");
+    let all = sim::load_jsonl(path).unwrap();
+    let sc = all.iter().find(|s| s.id == "sc-00034").unwrap();
+    let mut cfg = config("picopinn");
+    cfg.record = true;
+    assert!(cfg.controller.phases.let_go_turn < 0.5);
+    let let_go = run_episode(sc, &cfg, 0).unwrap();
+    cfg.controller.phases.let_go_turn = 10.0;
+    let press_on = run_episode(sc, &cfg, 0).unwrap();
+    assert!(let_go.success(), "{:?}", let_go.metrics);
+    assert_eq!(
+        press_on.cause(),
+        Some(FailureCause::UnsafeRebound),
+        "{:?}",
+        press_on.metrics
+    );
+    let (a, b) = (
+        first_in(&let_go, planner::Phase::Stabilising).unwrap(),
+        first_in(&press_on, planner::Phase::Stabilising).unwrap(),
+    );
+    assert!(
+        a < 4.0 && b > a + 0.2,
+        "let go at {a} s, pressed on until {b} s"
+    );
+}
