@@ -21,6 +21,7 @@ from safetensors.numpy import load_file, save_file  # noqa: E402
 from picopit import _core, load_params_dict  # noqa: E402
 from picopit import datagen  # noqa: E402
 from picopit.cli import main  # noqa: E402
+from picopit.eval_surrogates import sliding  # noqa: E402
 from picopit.compress import CompressConfig, TensorClusters, choose_threshold, compressed_model  # noqa: E402
 from picopit.physics import FourDof  # noqa: E402
 from picopit.surrogate_nn import (FEATURES, OUTPUTS, ModelFileError, apply_increments,  # noqa: E402
@@ -498,6 +499,9 @@ def test_pipeline_smoke(tiny_data, tmp_path, capsys):
     for m in res["models"].values():
         for k in ("params", "heading_rmse_rad", "roll_rmse_rad", "rollout_heading_rmse_rad"):
             assert k in m and m[k] is not None
+    for m in res["models"].values():
+        assert 0 <= m["sliding_windows"] <= m["rollout_windows"]
+        assert m["rollout_final_speed_rmse_mps"] >= 0
     assert res["models"]["4dof"]["params"] == 0
     assert res["models"]["pinn"]["params"] == 11 * 64 + 64 + 2 * (64 * 64 + 64) + 64 * 8 + 8
     assert 56 < res["models"]["picopinn"]["params"] <= 812
@@ -506,6 +510,17 @@ def test_pipeline_smoke(tiny_data, tmp_path, capsys):
     assert meta["data_hash"] == man["data_hash"] and meta["seed"] == "0" and meta["kind"] == "picopinn"
     assert "picopit compress" in meta["command"] and meta["git_commit"]
     assert "| parameters |" in capsys.readouterr().out
+
+
+def test_sliding_starts_are_spun_targets_moving():
+    # [vx, vy, ψ, r, p, φ, X, Y]: straight on, slipping 0.46 rad, sideways, backwards at
+    # 30° slip, slipping but almost at rest.
+    x = np.array([[20.0, 1.0, 0, 0, 0, 0, 0, 0],
+                  [10.0, 5.0, 0, 0, 0, 0, 0, 0],
+                  [0.0, -3.0, 0, 0, 0, 0, 0, 0],
+                  [-4.0, 2.4, 0, 0, 0, 0, 0, 0],
+                  [0.3, 0.5, 0, 0, 0, 0, 0, 0]])
+    assert sliding(x).tolist() == [False, True, True, True, False]
 
 
 def test_cli_bad_input_exits_2_naming_the_problem(tmp_path, capsys):

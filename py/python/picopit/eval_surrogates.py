@@ -6,7 +6,10 @@ test episodes.
 - Open loop: 2 s (40 steps) rollouts of each model on its own predictions with the recorded
   inputs and contacts (the body-frame contact force follows the predicted heading), from a
   start every ``stride`` steps of every test episode; RMSE over all rollout steps and the
-  error at the end.
+  error at the end, and the speed error at the end. The same end errors over the rollouts
+  that start sliding (body slip |atan2(v_y, |v_x|)| above ``SLIDE_SLIP``, faster than
+  ``SLIDE_SPEED``): a spun target, whose free slide the planner predicts when it decides
+  whether to let go (docs/RESULTS.md).
 
 Every model is given the episode's road μ: the Rust ``FourDofTarget`` at construction, the
 learned models (format version 3, μ is their last feature) through ``SurrogateModel.mu``. The
@@ -33,6 +36,21 @@ from .surrogate_nn import GatherMLP, load_model
 from .train import torch_threads
 
 MODELS = ("4dof", "pinn", "picopinn")
+SLIDE_SLIP = 0.3
+"""Body slip angle (rad) above which a rollout start counts as sliding."""
+SLIDE_SPEED = 1.0
+"""Speed (m/s) above which a rollout start counts as sliding."""
+
+
+def _speed(x: np.ndarray) -> np.ndarray:
+    return np.hypot(x[..., 0], x[..., 1])
+
+
+def sliding(x: np.ndarray) -> np.ndarray:
+    """Which states (rows of ``x``, target state order) slide: slip above ``SLIDE_SLIP``
+    and speed above ``SLIDE_SPEED``."""
+    slip = np.abs(np.arctan2(x[..., 1], np.abs(x[..., 0])))
+    return (slip > SLIDE_SLIP) & (_speed(x) > SLIDE_SPEED)
 
 
 def wrap_angles(a: np.ndarray) -> np.ndarray:
@@ -147,6 +165,16 @@ def evaluate_model(m: _Batched, a: Mapping[str, np.ndarray], horizon: int, strid
     res.update({f"rollout_{k}": v for k, v in roll.items()})
     res["rollout_final_heading_rmse_rad"] = end["heading_rmse_rad"]
     res["rollout_final_position_rmse_m"] = end["position_rmse_m"]
+    true_end = a["x_next"][starts + horizon - 1]
+    dv = _speed(x) - _speed(true_end)
+    res["rollout_final_speed_rmse_mps"] = float(np.sqrt(np.mean(dv ** 2))) if dv.size else float("nan")
+    slide = sliding(a["x"][starts])
+    end_slide = _errors(errs[-1][slide], np.zeros_like(errs[-1][slide]))
+    res["sliding_windows"] = int(slide.sum())
+    res["sliding_final_heading_rmse_rad"] = end_slide["heading_rmse_rad"]
+    res["sliding_final_position_rmse_m"] = end_slide["position_rmse_m"]
+    res["sliding_final_speed_rmse_mps"] = (float(np.sqrt(np.mean(dv[slide] ** 2)))
+                                           if slide.any() else float("nan"))
     res["rollout_heading_rmse_by_step"] = per_step_heading.tolist()
     res["rollout_windows"] = int(len(starts))
     res["eval_seconds"] = seconds
@@ -199,6 +227,11 @@ def markdown(res: Mapping[str, Any]) -> str:
         ("2 s rollout position RMSE (m)", "rollout_position_rmse_m", "{:.3f}"),
         ("heading error at 2 s, RMSE (rad)", "rollout_final_heading_rmse_rad", "{:.4f}"),
         ("position error at 2 s, RMSE (m)", "rollout_final_position_rmse_m", "{:.3f}"),
+        ("speed error at 2 s, RMSE (m/s)", "rollout_final_speed_rmse_mps", "{:.3f}"),
+        ("rollouts starting in a slide (slip > 0.3 rad)", "sliding_windows", "{:d}"),
+        ("  heading error at 2 s, RMSE (rad)", "sliding_final_heading_rmse_rad", "{:.4f}"),
+        ("  position error at 2 s, RMSE (m)", "sliding_final_position_rmse_m", "{:.3f}"),
+        ("  speed error at 2 s, RMSE (m/s)", "sliding_final_speed_rmse_mps", "{:.3f}"),
         ("step from Python (µs/call)", "step_us", "{:.1f}"),
         ("step+Jacobian from Python (µs/call)", "step_jac_us", "{:.1f}"),
         ("backend", "backend", "{}"),
