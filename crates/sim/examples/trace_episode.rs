@@ -2,6 +2,9 @@
 //! phase, the command and the contact force), then its metrics.
 //!
 //! `cargo run --release -p picopit-sim --example trace_episode -- ID [CONFIG]`
+//!
+//! With `STATE_AT=T` it also prints the full recorded states at time `T` (s): the target's
+//! `[vx, vy, ψ, r, p, φ, X, Y]`, its driver's input and the bullet's state.
 mod common;
 
 use sim::episode::{run_episode, EpisodeConfig};
@@ -25,6 +28,17 @@ fn main() {
         println!("t={:5.2} {:?} Δs={:6.2} T: d={:5.2} ψ-h={:6.1}° v={:5.2} | B: d={:5.2} ψ-h={:6.1}° v={:5.2} | cmd ({:6.3},{:7.1}) Fn={:6.0}",
             s.time, s.phase, fb.s - ft.s, ft.d, (s.target[2]-ft.heading).to_degrees(), s.target[0].hypot(s.target[1]),
             fb.d, (s.bullet[2]-fb.heading).to_degrees(), s.bullet[3], s.command[0], s.command[1], s.contact_force[0]);
+    }
+    // STATE_AT=T: the full recorded states and the target driver's input at time T (s).
+    if let Ok(t) = std::env::var("STATE_AT") {
+        let t: f64 = t.parse().expect("STATE_AT: a time in seconds");
+        let half = 0.5 * cfg.controller.mpc.dt;
+        for s in r.trajectory.iter().filter(|s| (s.time - t).abs() <= half) {
+            println!(
+                "state t={:.2} target {:?} target_input {:?} bullet {:?}",
+                s.time, s.target, s.target_command, s.bullet
+            );
+        }
     }
     for p in &r.plans {
         println!("{}", common::plan_line(p, cfg.controller.planner.dt));
