@@ -278,11 +278,14 @@ impl PitController {
         }
         // The push has turned the target far enough: let go before the spinning body swings
         // back into the bullet (the next touch would be a rebound).
-        if let (Phase::Pit, Some(frame)) = (self.phases.phase(), self.pit_frame) {
-            if wrap(input.target[idx::PSI] - frame).abs() > self.settings.phases.pit_yaw_done {
-                self.phases.stabilise(input.time);
-                changed = true;
-            }
+        let turned = self
+            .pit_frame
+            .map(|f| wrap(input.target[idx::PSI] - f).abs());
+        if self.phases.phase() == Phase::Pit
+            && turned.is_some_and(|a| a > self.settings.phases.pit_yaw_done)
+        {
+            self.phases.stabilise(input.time);
+            changed = true;
         }
         let phase = self.phases.phase();
         // The upper layer: replan on its period and on every phase change.
@@ -327,13 +330,13 @@ impl PitController {
             // Once the push has turned the target, a replan that finds no push meeting the
             // terminal set ends it: the planner's best effort would keep pressing on a
             // spinning target (`PhaseSettings::let_go_turn`).
-            if let (Phase::Pit, Mode::Pit, Some(frame)) = (phase, pkg.mode, self.pit_frame) {
-                if pkg.infeasible.is_some()
-                    && self.phases.contacted()
-                    && wrap(input.target[idx::PSI] - frame).abs() > self.settings.phases.let_go_turn
-                {
-                    self.phases.stabilise(input.time);
-                }
+            if phase == Phase::Pit
+                && pkg.mode == Mode::Pit
+                && pkg.infeasible.is_some()
+                && self.phases.contacted()
+                && turned.is_some_and(|a| a > self.settings.phases.let_go_turn)
+            {
+                self.phases.stabilise(input.time);
             }
             let period = if phase == Phase::Pit {
                 self.settings.planner.replan_period_pit
