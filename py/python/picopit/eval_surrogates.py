@@ -58,9 +58,14 @@ def wrap_angles(a: np.ndarray) -> np.ndarray:
     return np.arctan2(np.sin(a), np.cos(a))
 
 
+def _rms(v: np.ndarray) -> float:
+    """Root mean square (NaN for no values)."""
+    return float(np.sqrt(np.mean(v ** 2))) if v.size else float("nan")
+
+
 def _errors(pred: np.ndarray, true: np.ndarray) -> Dict[str, float]:
     e = pred - true
-    rms = lambda v: float(np.sqrt(np.mean(v ** 2))) if v.size else float("nan")  # noqa: E731
+    rms = _rms
     return {
         "heading_rmse_rad": rms(wrap_angles(e[..., 2])),
         "yaw_rate_rmse_radps": rms(e[..., 3]),
@@ -167,14 +172,13 @@ def evaluate_model(m: _Batched, a: Mapping[str, np.ndarray], horizon: int, strid
     res["rollout_final_position_rmse_m"] = end["position_rmse_m"]
     true_end = a["x_next"][starts + horizon - 1]
     dv = _speed(x) - _speed(true_end)
-    res["rollout_final_speed_rmse_mps"] = float(np.sqrt(np.mean(dv ** 2))) if dv.size else float("nan")
+    res["rollout_final_speed_rmse_mps"] = _rms(dv)
     slide = sliding(a["x"][starts])
     end_slide = _errors(errs[-1][slide], np.zeros_like(errs[-1][slide]))
     res["sliding_windows"] = int(slide.sum())
     res["sliding_final_heading_rmse_rad"] = end_slide["heading_rmse_rad"]
     res["sliding_final_position_rmse_m"] = end_slide["position_rmse_m"]
-    res["sliding_final_speed_rmse_mps"] = (float(np.sqrt(np.mean(dv[slide] ** 2)))
-                                           if slide.any() else float("nan"))
+    res["sliding_final_speed_rmse_mps"] = _rms(dv[slide])
     res["rollout_heading_rmse_by_step"] = per_step_heading.tolist()
     res["rollout_windows"] = int(len(starts))
     res["eval_seconds"] = seconds
