@@ -25,8 +25,13 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def recorded_state(scene: str, t: float, config: str):
     exe = os.path.join(ROOT, "target", "release", "examples", "trace_episode")
-    out = subprocess.run([exe, scene, config], cwd=ROOT, env={**os.environ, "STATE_AT": str(t)},
-                         capture_output=True, text=True, check=True).stdout
+    if not os.path.isfile(exe):
+        sys.exit(f"{exe} not found: cargo build --release -p picopit-sim --example trace_episode")
+    run = subprocess.run([exe, scene, config], cwd=ROOT, env={**os.environ, "STATE_AT": str(t)},
+                         capture_output=True, text=True)
+    if run.returncode != 0:
+        sys.exit(f"trace_episode {scene} failed: {(run.stderr.strip().splitlines() or ['?'])[-1]}")
+    out = run.stdout
     m = re.search(r"^state t=(\S+) target \[([^\]]*)\] target_input \[([^\]]*)\]", out, re.M)
     if m is None:
         sys.exit(f"{scene}: no recorded state at {t} s (the episode ended before?)")
@@ -37,8 +42,9 @@ def recorded_state(scene: str, t: float, config: str):
 def scene_of(scene: str, path: str) -> dict:
     with open(path) as f:
         for line in f:
-            if f'"id":"{scene}"' in line.replace(" ", ""):
-                return json.loads(line)
+            sc = json.loads(line)
+            if sc.get("id") == scene:
+                return sc
     sys.exit(f"{path}: no scene {scene}")
 
 
@@ -62,10 +68,13 @@ def main() -> None:
     print(f"{args.scene} at {t:.2f} s, μ {mu:.3f}: heading {x0[2]:.3f} rad, yaw rate {x0[3]:.3f} rad/s, "
           f"speed {np.hypot(x0[0], x0[1]):.2f} m/s, slip {np.arctan2(x0[1], abs(x0[0])):.2f} rad; "
           f"driver input {u.tolist()}")
-    steps = int(round(args.seconds / 0.05))
-    every = 10
-    print("model      " + "  ".join(f"{(k + 1) * 0.05:>4.1f} s: ψ, r, v      " for k in range(every - 1, steps, every)))
+    dt = models["4dof"].dt
+    steps = int(round(args.seconds / dt))
+    every = max(1, int(round(0.5 / dt)))
+    print("model      " + "  ".join(f"{(k + 1) * dt:>4.1f} s: ψ, r, v      " for k in range(every - 1, steps, every)))
     for name, m in models.items():
+        if abs(m.dt - dt) > 1e-12:
+            sys.exit(f"{name}: step {m.dt} s, the 4-DOF model's {dt} s")
         x, cells = x0.copy(), []
         for k in range(steps):
             x = m.step(x, u)

@@ -10,6 +10,12 @@ mod common;
 use sim::episode::{run_episode, EpisodeConfig};
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    let state_at: Option<f64> = std::env::var("STATE_AT").ok().map(|t| {
+        t.parse().unwrap_or_else(|_| {
+            eprintln!("STATE_AT: expected a time in seconds, got {t:?}");
+            std::process::exit(2)
+        })
+    });
     let id = &args[0];
     let mut cfg = EpisodeConfig::parse(args.get(1).map_or("picopinn", String::as_str)).unwrap();
     cfg.record = true;
@@ -30,8 +36,7 @@ fn main() {
             fb.d, (s.bullet[2]-fb.heading).to_degrees(), s.bullet[3], s.command[0], s.command[1], s.contact_force[0]);
     }
     // STATE_AT=T: the full recorded states and the target driver's input at time T (s).
-    if let Ok(t) = std::env::var("STATE_AT") {
-        let t: f64 = t.parse().expect("STATE_AT: a time in seconds");
+    if let Some(t) = state_at {
         let half = 0.5 * cfg.controller.mpc.dt;
         for s in r.trajectory.iter().filter(|s| (s.time - t).abs() <= half) {
             println!(
