@@ -590,6 +590,7 @@ mod tests {
             ("[planner]\nforce_max_g = -1.0", "force_max_g"),
             ("[planner.weights]\npenalty = 0.0", "weights.penalty"),
             ("[phases]\nrelease_gap = 0.01", "phases.release_gap"),
+            ("[phases]\nlet_go_turn = -0.1", "phases.let_go_turn"),
             ("[planner]\ndt = 0.1", "planner.dt"),
             ("[mpc]\nhorizon = 1", "horizon"),
             ("[planner]\ncheck_horizon = 1e9", "check_horizon"),
