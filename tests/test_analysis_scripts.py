@@ -1,5 +1,8 @@
 """The analysis scripts over example outputs: scripts/oracle_surrogate.py counts what the
-lines say and refuses a malformed file naming the line."""
+lines say and refuses a malformed file naming the line; scripts/seed_scatter.sh tabulates the
+shipped pair for seed 0 and refuses bad arguments naming them."""
+import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -55,3 +58,36 @@ def test_oracle_surrogate_refuses_a_malformed_line(tmp_path):
     assert "line 2" in r.stderr and r.stdout == ""
     r = run(tmp_path / "missing.txt")
     assert r.returncode == 1 and "missing.txt" in r.stderr
+
+
+SEED_SCATTER = ROOT / "scripts" / "seed_scatter.sh"
+
+
+def seed_scatter(*args, **env):
+    return subprocess.run(["bash", str(SEED_SCATTER), *map(str, args)], capture_output=True,
+                          text=True, env={**os.environ, "PYTHON": sys.executable, **env})
+
+
+def test_seed_scatter_reads_the_shipped_pair_for_seed_0():
+    r = seed_scatter(0)
+    assert r.returncode == 0, r.stderr
+    m = json.loads((ROOT / "models" / "full_size" / "eval.json").read_text())["models"]
+    row = [l for l in r.stdout.splitlines() if l.startswith("| 0 |")]
+    assert len(row) == 1
+    cells = [c.strip() for c in row[0].split("|")[2:-1]]
+    t, p = m["pinn"]["heading_rmse_rad"], m["picopinn"]["heading_rmse_rad"]
+    assert cells[0] == f"{t * 1e3:.3f} / {p * 1e3:.3f} ({p / t:.2f}×)"
+    t, p = m["pinn"]["rollout_heading_rmse_rad"], m["picopinn"]["rollout_heading_rmse_rad"]
+    assert cells[1] == f"{t:.4f} / {p:.4f} ({p / t:.2f}×)"
+
+
+def test_seed_scatter_refuses_bad_arguments_naming_them(tmp_path):
+    r = seed_scatter("x")
+    assert r.returncode == 2 and "'x'" in r.stderr
+    r = seed_scatter("--set", "quarter_scale", 1)
+    assert r.returncode == 2 and "quarter_scale" in r.stderr
+    missing = tmp_path / "no-data"
+    r = seed_scatter("--data", missing, 1)
+    assert r.returncode == 2 and str(missing) in r.stderr and r.stdout == ""
+    r = seed_scatter()
+    assert r.returncode == 2 and "usage" in r.stderr
