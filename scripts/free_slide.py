@@ -10,7 +10,6 @@ that `STATE_AT=T` prints) and the scene's μ and parameter set from the scenario
     .venv/bin/python scripts/free_slide.py sc-00034 3.85 [--config JSON] [--seconds 2]
 """
 import argparse
-import json
 import os
 import re
 import subprocess
@@ -40,11 +39,14 @@ def recorded_state(scene: str, t: float, config: str):
 
 
 def scene_of(scene: str, path: str) -> dict:
-    with open(path) as f:
-        for line in f:
-            sc = json.loads(line)
-            if sc.get("id") == scene:
-                return sc
+    """The scene from the scenario file, read and validated by the project's own loader."""
+    try:
+        scenes = _core.load_scenarios(path)
+    except (OSError, _core.ScenarioError) as e:
+        sys.exit(f"{path}: {e}")
+    for sc in scenes:
+        if sc.get("id") == scene:
+            return sc
     sys.exit(f"{path}: no scene {scene}")
 
 

@@ -65,14 +65,13 @@ def _rms(v: np.ndarray) -> float:
 
 def _errors(pred: np.ndarray, true: np.ndarray) -> Dict[str, float]:
     e = pred - true
-    rms = _rms
     return {
-        "heading_rmse_rad": rms(wrap_angles(e[..., 2])),
-        "yaw_rate_rmse_radps": rms(e[..., 3]),
-        "roll_rmse_rad": rms(e[..., 5]),
-        "position_rmse_m": rms(np.hypot(e[..., 6], e[..., 7])),
-        "vx_rmse_mps": rms(e[..., 0]),
-        "vy_rmse_mps": rms(e[..., 1]),
+        "heading_rmse_rad": _rms(wrap_angles(e[..., 2])),
+        "yaw_rate_rmse_radps": _rms(e[..., 3]),
+        "roll_rmse_rad": _rms(e[..., 5]),
+        "position_rmse_m": _rms(np.hypot(e[..., 6], e[..., 7])),
+        "vx_rmse_mps": _rms(e[..., 0]),
+        "vy_rmse_mps": _rms(e[..., 1]),
     }
 
 
