@@ -7,11 +7,11 @@
 #   scripts/seed_scatter.sh [--set full_size] [--data DIR] [--out DIR] SEED...
 #
 # The data folder is the shipped models' (runs/surrogates/<set>/data, made by
-# models/regenerate.sh). Seed 0 is the shipped pair: its evaluation is read from
+# models/regenerate.sh); DATA and OUT are relative to the repository's root. Seed 0 is the shipped pair: its evaluation is read from
 # models/<set>/eval.json instead of being trained again. One torch thread per run; about
 # 10 min per seed at full size on the 2-core VM. Each seed also writes
-# OUT/models_s<SEED>/<set>/{pinn,picopinn}.safetensors (the other set linked to the shipped
-# models), a models folder for the closed loop:
+# OUT/models_s<SEED>/<set>/{pinn,picopinn}.safetensors, a models folder for the closed loop
+# (the other set linked to the shipped models until a run for it fills it in):
 #   ./target/release/examples/episodes '{"preset":"picopinn","clock":"simulated","models_dir":"OUT/models_s1"}' 0 2048
 # PYTHON and PICOPIT override the interpreter and the command line (default: the .venv's).
 set -euo pipefail
@@ -22,13 +22,14 @@ OUT=runs/seed-scatter
 SEEDS=()
 while [ $# -gt 0 ]; do
     case "$1" in
-        --set) SET="$2"; shift 2 ;;
-        --data) DATA="$2"; shift 2 ;;
-        --out) OUT="$2"; shift 2 ;;
+        --set|--data|--out)
+            [ $# -ge 2 ] || { echo "seed_scatter.sh: $1 needs a value" >&2; exit 2; }
+            case "$1" in --set) SET="$2" ;; --data) DATA="$2" ;; --out) OUT="$2" ;; esac
+            shift 2 ;;
         -h|--help) sed -n 2,16p "$0"; exit 0 ;;
         -*) echo "seed_scatter.sh: unknown option $1" >&2; exit 2 ;;
         *) [[ "$1" =~ ^[0-9]+$ ]] || { echo "seed_scatter.sh: a seed is a non-negative integer, got '$1'" >&2; exit 2; }
-           SEEDS+=("$1"); shift ;;
+           SEEDS+=("$((10#$1))"); shift ;;
     esac
 done
 [ ${#SEEDS[@]} -gt 0 ] || { echo "usage: scripts/seed_scatter.sh [--set SET] [--data DIR] [--out DIR] SEED..." >&2; exit 2; }
@@ -37,11 +38,10 @@ case "$SET" in full_size) OTHER=half_scale ;; half_scale) OTHER=full_size ;;
 DATA="${DATA:-runs/surrogates/$SET/data}"
 PYTHON="${PYTHON:-.venv/bin/python}"
 PICOPIT="${PICOPIT:-.venv/bin/picopit}"
-for seed in "${SEEDS[@]}"; do
-    [ "$seed" = 0 ] && continue
+if [[ " ${SEEDS[*]} " =~ \ [1-9][0-9]*\  ]]; then  # some seed to train
     [ -f "$DATA/manifest.json" ] || { echo "seed_scatter.sh: no datagen folder at $DATA (run models/regenerate.sh $SET first)" >&2; exit 2; }
     [ -x "$PICOPIT" ] || { echo "seed_scatter.sh: $PICOPIT missing (run scripts/setup.sh)" >&2; exit 2; }
-done
+fi
 export PICOPIT_THREADS="${PICOPIT_THREADS:-1}"
 EVALS=()
 for seed in "${SEEDS[@]}"; do
@@ -51,8 +51,11 @@ for seed in "${SEEDS[@]}"; do
     fi
     run="$OUT/$SET/s$seed"
     dst="$OUT/models_s$seed"
+    # The other set links to the shipped models unless a run for it filled it already; a link
+    # left for this set by such a run is replaced, never written through into models/.
+    [ -L "$dst/$SET" ] && rm "$dst/$SET"
     mkdir -p "$run" "$dst/$SET"
-    ln -sfn "$(pwd)/models/$OTHER" "$dst/$OTHER"
+    [ -e "$dst/$OTHER" ] || ln -s "$(pwd)/models/$OTHER" "$dst/$OTHER"
     "$PICOPIT" train --data "$DATA" --out "$run/train" --model "$dst/$SET/pinn.safetensors" --seed "$seed" --no-progress
     "$PICOPIT" compress --teacher "$dst/$SET/pinn.safetensors" --data "$DATA" --out "$run/compress" \
         --model "$dst/$SET/picopinn.safetensors" --seed "$seed" --no-progress

@@ -91,3 +91,39 @@ def test_seed_scatter_refuses_bad_arguments_naming_them(tmp_path):
     assert r.returncode == 2 and str(missing) in r.stderr and r.stdout == ""
     r = seed_scatter()
     assert r.returncode == 2 and "usage" in r.stderr
+
+
+def test_seed_scatter_trains_into_its_own_folder_never_into_the_shipped_models(tmp_path):
+    # A stand-in for the picopit command line: writes the files it is asked for (the
+    # evaluation a copy of the shipped one) and logs its calls.
+    fake = tmp_path / "picopit"
+    log = tmp_path / "calls.txt"
+    shipped = ROOT / "models" / "full_size" / "eval.json"
+    fake.write_text(f"""#!/usr/bin/env bash
+echo "$@" >> {log}
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --model) echo model > "$2"; shift 2 ;;
+    --json) cp {shipped} "$2"; shift 2 ;;
+    *) shift ;;
+  esac
+done
+""")
+    fake.chmod(0o755)
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "manifest.json").write_text("{}")
+    out = tmp_path / "out"
+    before = {p: p.read_bytes() for p in (ROOT / "models").rglob("*.safetensors")}
+    for s in ("half_scale", "full_size"):  # the second run finds the first's link to models/
+        r = seed_scatter("--set", s, "--data", data, "--out", out, 3, PICOPIT=str(fake))
+        assert r.returncode == 0, r.stderr
+        assert "| 3 |" in r.stdout
+    for s in ("half_scale", "full_size"):
+        d = out / "models_s3" / s
+        assert d.is_dir() and not d.is_symlink()
+        assert (d / "pinn.safetensors").read_text() == "model\n"
+    assert {p: p.read_bytes() for p in (ROOT / "models").rglob("*.safetensors")} == before
+    calls = log.read_text().splitlines()
+    assert [c.split()[0] for c in calls] == ["train", "compress", "eval-surrogates"] * 2
+    assert all("--seed 3" in c for c in calls if not c.startswith("eval"))
