@@ -13,7 +13,9 @@ judged in the truth, by adhesion band and driver, and set against the closed loo
 
 prints Markdown: per model, the share of scenes its earliest feasible shove (`first`) and
 its most forgiving one (`robust`) save, and the expected success over that shove's box
-(`exp`); by group; the precision and recall of its verdict on single shoves; and, for
+(`exp`); by group; the precision and recall of its verdict on single shoves; its optimum
+against its average feasible shove (`best`, `mean`, when the log has them); what it holds
+against the succeeding shoves it rejects (`miss_*`, when the log has them); and, for
 `--model`, the closed loop's successes among the scenes whose `first` shove works and
 among those where it does not.
 """
@@ -99,6 +101,37 @@ def main() -> int:
             cells += [f"{100 * both / max(called, 1):.1f} %", f"{100 * both / max(works, 1):.1f} %"]
         label = "**all**" if g == "all" else f"{g} {v}"
         print(f"| {label} | " + " | ".join(cells) + " |")
+    if all("best" in r[2][m] and "mean" in r[2][m] for r in rows for m in models):
+        print("\nthe model's optimum (`best`: the feasible shove it puts nearest the reversed "
+              "heading) against a feasible shove at random (`mean`), at the earliest time it "
+              "calls one feasible:\n")
+        print("| group | " + " | ".join(f"{m} scenes | {m} best | {m} mean | {m} best − mean"
+                                        for m in models) + " |")
+        print("|---|" + "---|---|---|---|" * len(models))
+        for g, v in keys:
+            sel = [r for r in rows if g == "all" or r[1][g] == v]
+            cells = []
+            for m in models:
+                # The model calls a shove feasible somewhere iff it has an earliest one.
+                called = [r[2][m] for r in sel if r[2][m]["both"] + r[2][m]["model_only"] > 0]
+                n = max(len(called), 1)
+                best = 100 * sum(c["best"] for c in called) / n
+                mean = 100 * sum(c["mean"] for c in called) / n
+                cells += [str(len(called)), f"{best:.1f} %", f"{mean:.1f} %",
+                          f"{best - mean:+.1f} points"]
+            label = "**all**" if g == "all" else f"{g} {v}"
+            print(f"| {label} | " + " | ".join(cells) + " |")
+    miss = ("miss_heading", "miss_road", "miss_stop", "miss_obstacle")
+    if all(f in r[2][m] for r in rows for m in models for f in miss):
+        print("\nwhat the model holds against the succeeding shoves it rejects (share of them; "
+              "a shove can fail several criteria):\n")
+        print("| model | rejected successes | terminal heading | road edge | stopping point "
+              "| obstacle |")
+        print("|---|---|---|---|---|---|")
+        for m in models:
+            n = sum(r[2][m]["truth_only"] for r in rows)
+            cells = [f"{100 * sum(r[2][m][f] for r in rows) / max(n, 1):.1f} %" for f in miss]
+            print(f"| {m} | {n:.0f} | " + " | ".join(cells) + " |")
     if episodes is not None:
         m = args.model
         if m not in models:

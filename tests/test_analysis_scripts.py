@@ -60,6 +60,51 @@ def test_oracle_surrogate_refuses_a_malformed_line(tmp_path):
     assert r.returncode == 1 and "missing.txt" in r.stderr
 
 
+def test_oracle_surrogate_sets_the_optimum_against_the_average_feasible_shove(tmp_path):
+    lines = [
+        # 4dof calls shoves feasible in both scenes; picopinn in the first only.
+        "scene sc-00001 curved lane_keep low ideal=1 | 4dof first=1 robust=1 exp=0.67 best=1 "
+        "mean=0.500 both=2 model_only=2 truth_only=0 | picopinn first=0 robust=0 exp=0.00 "
+        "best=0 mean=0.250 both=1 model_only=3 truth_only=1",
+        "scene sc-00002 curved none high ideal=1 | 4dof first=0 robust=0 exp=0.00 best=0 "
+        "mean=0.000 both=0 model_only=4 truth_only=2 | picopinn first=0 robust=0 exp=0.00 "
+        "best=0 mean=0.000 both=0 model_only=0 truth_only=2",
+    ]
+    log = tmp_path / "surrogate.txt"
+    log.write_text("\n".join(lines) + "\n")
+    r = run(log)
+    assert r.returncode == 0, r.stderr
+    table = r.stdout.split("the model's optimum")[1]
+    row = [l for l in table.splitlines() if l.startswith("| **all** |")][0]
+    cells = [c.strip() for c in row.split("|")[2:-1]]
+    # 4dof: 2 scenes, best (1 + 0) / 2, mean (0.5 + 0) / 2; picopinn: 1 scene, 0 and 0.25.
+    assert cells == ["2", "50.0 %", "25.0 %", "+25.0 points",
+                     "1", "0.0 %", "25.0 %", "-25.0 points"]
+    # Logs without the fields (older runs) print no such tables.
+    old = tmp_path / "old.txt"
+    old.write_text("\n".join(LINES) + "\n")
+    out = run(old).stdout
+    assert "the model's optimum" not in out and "rejects" not in out
+
+
+def test_oracle_surrogate_says_what_the_model_holds_against_the_shoves_it_rejects(tmp_path):
+    miss = " miss_heading={} miss_road={} miss_stop={} miss_obstacle={}"
+    lines = [
+        "scene sc-00001 curved lane_keep low ideal=1 | 4dof first=1 robust=1 exp=0.67 "
+        "both=2 model_only=2 truth_only=4" + miss.format(4, 0, 1, 0),
+        "scene sc-00002 curved none high ideal=1 | 4dof first=0 robust=0 exp=0.00 "
+        "both=0 model_only=4 truth_only=6" + miss.format(1, 6, 0, 2),
+    ]
+    log = tmp_path / "surrogate.txt"
+    log.write_text("\n".join(lines) + "\n")
+    r = run(log)
+    assert r.returncode == 0, r.stderr
+    row = [l for l in r.stdout.split("rejects")[1].splitlines() if l.startswith("| 4dof |")][0]
+    # 10 rejected successes: heading 5, road 6, stop 1, obstacle 2.
+    assert [c.strip() for c in row.split("|")[2:-1]] == ["10", "50.0 %", "60.0 %", "10.0 %",
+                                                         "20.0 %"]
+
+
 SEED_SCATTER = ROOT / "scripts" / "seed_scatter.sh"
 
 

@@ -14,10 +14,19 @@
 //! * `robust`: the shove whose 3 × 3 box (±0.1 s, ±1 size step) the model calls feasible
 //!   most often;
 //! * `exp`: that choice's expected true success when the push lands anywhere in its box;
+//! * `best`: at the earliest time the model calls a shove feasible, the feasible shove it
+//!   puts nearest the reversed heading (the least projected heading error, the main term of
+//!   the planner's objective J_T): what an optimiser over the push picks;
+//! * `mean`: the true success of a shove drawn at random among the model's feasible shoves
+//!   at that time. `best` below `mean` means the model's own optimum is worse than its
+//!   average feasible push: its optimiser would seek the model's errors (the winner's
+//!   curse); a model whose confidence carries information has `best` at or above `mean`;
 //!
 //! and how the model's verdict on single shoves agrees with the truth (precision: the share
 //! of shoves called feasible that succeed; recall: the share of succeeding shoves called
-//! feasible).
+//! feasible), with what the model holds against the succeeding shoves it rejects (`miss_*`:
+//! short of or past the terminal heading set, over the road edge within the look-ahead,
+//! its stopping point over the edge, too near an obstacle; a shove can fail several).
 //!
 //! `cargo run --release -p picopit-sim --example oracle_surrogate -- [FIRST] [COUNT]
 //! [THREADS] [MODELS] [STEPS] [PLANNER] [CACHE]` (defaults 0, 192, 2, `4dof,pinn,picopinn`,
@@ -30,10 +39,24 @@ mod common;
 
 use dynamics::geometry::Vec2;
 use dynamics::{TargetInput, TargetState};
-use planner::{Planner, PlannerInput, PlannerSettings};
+use planner::{Judgement, Planner, PlannerInput, PlannerSettings};
 use sim::episode::{target_model, ModelKind};
 use sim::oracle::{shove_grid, shove_states, DriverView, GridChoice, OracleSettings, ShoveGrid};
 use std::path::Path;
+
+/// Bins of the model's projected heading error (rad) of the shoves it calls feasible: the
+/// upper edges (the last bin takes the rest, up to `heading_tol`).
+const CONFIDENCE_EDGES: [f64; 3] = [0.15, 0.3, 0.45];
+
+/// Per confidence bin: shoves called feasible, and of them true successes.
+type Confidence = [[usize; 2]; CONFIDENCE_EDGES.len() + 1];
+
+fn confidence_bin(heading_error: f64) -> usize {
+    CONFIDENCE_EDGES
+        .iter()
+        .position(|&e| heading_error < e)
+        .unwrap_or(CONFIDENCE_EDGES.len())
+}
 
 /// One model's verdict on a scene.
 #[derive(Default, Clone, Copy)]
@@ -41,10 +64,29 @@ struct Verdict {
     first: f64,
     robust: f64,
     exp: f64,
+    best: f64,
+    mean: f64,
+    /// Whether the model calls any shove feasible (`best` and `mean` are then defined).
+    called: bool,
     /// Shoves: called feasible and true success, called feasible only, true success only.
     both: usize,
     model_only: usize,
     truth_only: usize,
+    /// Of the `truth_only` shoves, those the model puts outside the terminal heading set,
+    /// over the road edge, with the stopping point over the edge, too near an obstacle.
+    miss: [usize; 4],
+}
+
+/// Which of the plan's criteria a judgement fails: the terminal heading set, the road, the
+/// stopping point, the obstacle clearance (as `Planner`'s feasibility test).
+fn failed(j: &Judgement, s: &PlannerSettings) -> [bool; 4] {
+    let tol = s.violation_tol;
+    [
+        j.heading_error > s.heading_tol,
+        j.road_margin < -tol || j.slide_margin < -tol,
+        j.stop_margin < -tol,
+        j.clearance < s.obstacle_clearance - tol,
+    ]
 }
 
 /// The true grid of a scene, from `cache` when it holds it (and written there when not).
@@ -82,7 +124,7 @@ fn judge_grid(
     kind: ModelKind,
     steps: usize,
     ps: &PlannerSettings,
-) -> Result<ShoveGrid, String> {
+) -> Result<(ShoveGrid, Vec<Judgement>), String> {
     let params = sc.params.load().map_err(|e| e.to_string())?;
     let road = sc.build_road().map_err(|e| e.to_string())?;
     let obstacles = sc.obstacles();
@@ -99,6 +141,7 @@ fn judge_grid(
     };
     let m = params.target.mass;
     let mut forces = vec![Vec2::zeros(); steps];
+    let mut judged = Vec::with_capacity(truth.success.len());
     for st in &states {
         let input = PlannerInput {
             time: st.time,
@@ -122,13 +165,20 @@ fn judge_grid(
                     .judge(&input, side, 0, &forces)
                     .map_err(|e| e.to_string())?;
                 grid.success.push(j.feasible);
+                judged.push(j);
             }
         }
     }
-    Ok(grid)
+    Ok((grid, judged))
 }
 
-fn verdict(truth: &ShoveGrid, view: &ShoveGrid) -> Verdict {
+fn verdict(
+    truth: &ShoveGrid,
+    view: &ShoveGrid,
+    judged: &[Judgement],
+    settings: &PlannerSettings,
+    confidence: &mut Confidence,
+) -> Verdict {
     let at = |c: Option<GridChoice>| {
         f64::from(u8::from(c.is_some_and(|c| {
             truth.get(c.time as isize, c.side, c.shove as isize)
@@ -143,10 +193,28 @@ fn verdict(truth: &ShoveGrid, view: &ShoveGrid) -> Verdict {
         }),
         ..Verdict::default()
     };
-    for (&t, &m) in truth.success.iter().zip(&view.success) {
+    for ((&t, &m), j) in truth.success.iter().zip(&view.success).zip(judged) {
         v.both += usize::from(t && m);
         v.model_only += usize::from(m && !t);
         v.truth_only += usize::from(t && !m);
+        if t && !m {
+            for (n, f) in v.miss.iter_mut().zip(failed(j, settings)) {
+                *n += usize::from(f);
+            }
+        }
+        if m {
+            let b = &mut confidence[confidence_bin(j.heading_error)];
+            b[0] += 1;
+            b[1] += usize::from(t);
+        }
+    }
+    // The earliest time with a feasible shove: its optimum and its average.
+    let heading: Vec<f64> = judged.iter().map(|j| j.heading_error).collect();
+    if let Some((pick, feasible)) = view.earliest_optimum(&heading) {
+        v.called = true;
+        v.best = f64::from(u8::from(truth.success[pick]));
+        v.mean =
+            feasible.iter().filter(|&&i| truth.success[i]).count() as f64 / feasible.len() as f64;
     }
     v
 }
@@ -218,6 +286,8 @@ fn main() {
     });
     // Per model: first, robust, exp summed; shoves both / model only / truth only.
     let mut sums = vec![Verdict::default(); kinds.len()];
+    let mut called = vec![0usize; kinds.len()];
+    let mut confidence = vec![Confidence::default(); kinds.len()];
     let (mut n, mut ideal, mut ideal_exp) = (0usize, 0.0, 0.0);
     for (sc, r) in chosen.iter().zip(&results) {
         let (truth, views) = match r {
@@ -239,24 +309,37 @@ fn main() {
             sc.adhesion.name(),
             u8::from(truth.earliest().is_some())
         );
-        for ((k, view), sum) in kinds.iter().zip(views).zip(sums.iter_mut()) {
-            let v = verdict(truth, view);
+        for (i, (k, (view, judged))) in kinds.iter().zip(views).enumerate() {
+            let v = verdict(truth, view, judged, &planner_settings, &mut confidence[i]);
+            let sum = &mut sums[i];
             line += &format!(
-                " | {} first={} robust={} exp={:.2} both={} model_only={} truth_only={}",
+                " | {} first={} robust={} exp={:.2} best={} mean={:.3} both={} model_only={} truth_only={} miss_heading={} miss_road={} miss_stop={} miss_obstacle={}",
                 k.name(),
                 v.first,
                 v.robust,
                 v.exp,
+                v.best,
+                v.mean,
                 v.both,
                 v.model_only,
-                v.truth_only
+                v.truth_only,
+                v.miss[0],
+                v.miss[1],
+                v.miss[2],
+                v.miss[3]
             );
+            called[i] += usize::from(v.called);
+            sum.best += v.best;
+            sum.mean += v.mean;
             sum.first += v.first;
             sum.robust += v.robust;
             sum.exp += v.exp;
             sum.both += v.both;
             sum.model_only += v.model_only;
             sum.truth_only += v.truth_only;
+            for (a, b) in sum.miss.iter_mut().zip(v.miss) {
+                *a += b;
+            }
         }
         println!("{line}");
     }
@@ -283,5 +366,63 @@ fn main() {
             share(s.both, s.model_only),
             share(s.both, s.truth_only)
         );
+    }
+    println!(
+        "\nthe model's optimum against its average feasible shove, at the earliest time it \
+         calls one feasible (scenes where it does)"
+    );
+    println!("| model | scenes | best | mean | best − mean |");
+    println!("|---|---|---|---|---|");
+    for ((k, s), &c) in kinds.iter().zip(&sums).zip(&called) {
+        let share = |x: f64| 100.0 * x / c.max(1) as f64;
+        println!(
+            "| {} | {c} | {:.1} % | {:.1} % | {:+.1} points |",
+            k.name(),
+            share(s.best),
+            share(s.mean),
+            share(s.best - s.mean)
+        );
+    }
+    println!(
+        "\nwhat the model holds against the succeeding shoves it rejects (share of them; a shove \
+         can fail several criteria)"
+    );
+    println!(
+        "| model | rejected successes | terminal heading | road edge | stopping point | obstacle |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for (k, s) in kinds.iter().zip(&sums) {
+        let share = |a: usize| 100.0 * a as f64 / s.truth_only.max(1) as f64;
+        println!(
+            "| {} | {} | {:.1} % | {:.1} % | {:.1} % | {:.1} % |",
+            k.name(),
+            s.truth_only,
+            share(s.miss[0]),
+            share(s.miss[1]),
+            share(s.miss[2]),
+            share(s.miss[3])
+        );
+    }
+    println!(
+        "\ntrue success of the shoves a model calls feasible, by its projected heading error (rad)"
+    );
+    let mut head = String::from("| model |");
+    let mut lo = 0.0;
+    for e in CONFIDENCE_EDGES.iter().copied().chain([f64::INFINITY]) {
+        head += &if e.is_finite() {
+            format!(" {lo:.2}–{e:.2} |")
+        } else {
+            format!(" ≥ {lo:.2} |")
+        };
+        lo = e;
+    }
+    println!("{head}");
+    println!("|---|{}", "---|".repeat(CONFIDENCE_EDGES.len() + 1));
+    for (k, conf) in kinds.iter().zip(&confidence) {
+        let cells: Vec<String> = conf
+            .iter()
+            .map(|[n, t]| format!("{:.1} % of {n}", 100.0 * *t as f64 / (*n).max(1) as f64))
+            .collect();
+        println!("| {} | {} |", k.name(), cells.join(" | "));
     }
 }

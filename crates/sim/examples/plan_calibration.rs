@@ -1,7 +1,9 @@
 //! How well does the upper layer's prediction come true in closed loop?
 //!
-//! `cargo run --release -p picopit-sim --example plan_calibration -- CONFIG [FIRST] [COUNT] [THREADS]`
-//! (CONFIG: a preset name or JSON, as `episodes` takes it; defaults scenes 0..64, 2 threads).
+//! `cargo run --release -p picopit-sim --example plan_calibration -- CONFIG [FIRST] [COUNT] [THREADS] [REPLAY]`
+//! (CONFIG: a preset name or JSON, as `episodes` takes it; defaults scenes 0..64, 2 threads;
+//! REPLAY: `4dof`, `pinn` or `picopinn`, the model of the replay table, by default the
+//! plan's own).
 //!
 //! Every PIT plan of every episode predicts the target's state over the look-ahead; the
 //! recorded truth says what happened. Per horizon (0.5, 1 and 2 s after the plan), over
@@ -19,6 +21,11 @@
 //! delivered contact (the plant's step-averaged force, normal and point of action) with the
 //! true command is the model's own error on the closed loop's contacts. Between them, the
 //! force's size and its geometry (point and normal) are swapped one at a time.
+//!
+//! With REPLAY another model replays the same plans. Its first row is then that model's
+//! prediction of the plan's own push: set against the plan's model on the same plans, and
+//! on the plans another planner made, it says whether a planner's optimiser seeks out
+//! pushes on which its own model promises more than the others do.
 mod common;
 
 use dynamics::{TargetInput, TargetModel, TargetState};
@@ -268,6 +275,12 @@ fn main() {
     let first = common::number(&args, 1, "FIRST", 0);
     let count = common::number(&args, 2, "COUNT", 64);
     let threads = common::number(&args, 3, "THREADS", 2);
+    let replay_kind: Option<sim::episode::ModelKind> = args.get(4).map(|k| {
+        serde_json::from_str(&format!("\"{k}\"")).unwrap_or_else(|_| {
+            eprintln!("REPLAY: {k:?} is not one of 4dof, pinn, picopinn");
+            std::process::exit(2);
+        })
+    });
     let scenes = common::scenes(first, count);
     let dt = cfg.controller.mpc.dt;
     let runs = common::map_scenes(&scenes, threads, |sc| {
@@ -275,7 +288,7 @@ fn main() {
             eprintln!("{}: {e}", sc.id);
             std::process::exit(1);
         });
-        let kind = cfg.planner_model.unwrap_or(cfg.model);
+        let kind = replay_kind.unwrap_or(cfg.planner_model.unwrap_or(cfg.model));
         let path = cfg.model_path.as_deref().filter(|_| kind == cfg.model);
         let mut model = sc
             .params
@@ -342,8 +355,9 @@ fn main() {
          ({} steps): planned mean {:.0} N, delivered mean {:.0} N, mean |difference| {:.0} N",
         gap[0], gap[1] / n, gap[2] / n, gap[3] / n
     );
+    let replay_name = replay_kind.map_or("the plan's model", |k| k.name());
     println!(
-        "\nreplay of the PIT plans made in contact with the plan's model, from the true state \
+        "\nreplay of the PIT plans made in contact with {replay_name}, from the true state \
          (largest state difference between the plan and its replay: {:.1e})",
         rep.plan_mismatch
     );

@@ -460,6 +460,29 @@ impl ShoveGrid {
         None
     }
 
+    /// What an optimiser over the push would pick in this grid's view: at the earliest time
+    /// with a success, the successful shove with the least `cost` (one value per shove, in
+    /// the order of `success`; ties go to the first), and every successful shove of that
+    /// time (indices into `success`, ascending), the pick among them. `None` when no shove
+    /// succeeds.
+    ///
+    /// # Panics
+    /// If `cost` does not hold one value per shove (a bug of the caller).
+    #[must_use]
+    pub fn earliest_optimum(&self, cost: &[f64]) -> Option<(usize, Vec<usize>)> {
+        assert_eq!(cost.len(), self.success.len(), "one cost per shove");
+        let c = self.earliest()?;
+        let per_time = self.sides.len() * self.shoves.len();
+        let at: Vec<usize> = (c.time * per_time..(c.time + 1) * per_time)
+            .filter(|&i| self.success[i])
+            .collect();
+        let pick = at
+            .iter()
+            .copied()
+            .reduce(|a, b| if cost[b] < cost[a] { b } else { a })?;
+        Some((pick, at))
+    }
+
     /// The successful shove whose box holds the most successes (the one that forgives the
     /// most); ties go to the earliest, then the first size and side.
     #[must_use]

@@ -3,7 +3,7 @@
 
 mod common;
 
-use sim::oracle::{ideal_pit, shove_grid, shove_states, DriverView, OracleSettings};
+use sim::oracle::{ideal_pit, shove_grid, shove_states, DriverView, OracleSettings, ShoveGrid};
 use sim::scenario::Scenario;
 
 fn scenario(v: &serde_json::Value) -> Scenario {
@@ -194,4 +194,35 @@ fn the_chooser_sees_one_state_per_grid_time() {
         );
         assert!(w[0].command[0].abs() < 1e-3, "steer {:?}", w[0].command);
     }
+}
+
+/// The optimiser's pick is the cheapest success at the earliest time with one, never a
+/// cheaper failure nor a cheaper success at a later time; a grid without a success has
+/// none.
+#[test]
+fn the_earliest_optimum_is_the_cheapest_success_of_the_first_time() {
+    // 3 times × 2 sides × 2 sizes; index (time · 2 + side) · 2 + size.
+    let mut success = vec![false; 12];
+    success[4] = true; // time 1, side 0, size 0
+    success[7] = true; // time 1, side 1, size 1
+    success[8] = true; // time 2 (later; cheaper)
+    let g = ShoveGrid {
+        times: vec![0.0, 0.1, 0.2],
+        sides: vec![1.0, -1.0],
+        shoves: vec![1.0, 2.0],
+        success,
+        t_reach: 0.0,
+    };
+    let mut cost = vec![0.5; 12];
+    cost[5] = 0.0; // a failure at time 1, cheaper than any success
+    cost[8] = 0.0; // the later success
+    cost[7] = 0.2;
+    assert_eq!(g.earliest_optimum(&cost), Some((7, vec![4, 7])));
+    cost[4] = 0.2; // a tie goes to the first
+    assert_eq!(g.earliest_optimum(&cost), Some((4, vec![4, 7])));
+    let none = ShoveGrid {
+        success: vec![false; 12],
+        ..g
+    };
+    assert_eq!(none.earliest_optimum(&cost), None);
 }
