@@ -194,6 +194,12 @@ fn verdict(
         ..Verdict::default()
     };
     for ((&t, &m), j) in truth.success.iter().zip(&view.success).zip(judged) {
+        // `failed` restates the planner's test: it must agree with the planner's verdict.
+        assert_eq!(
+            failed(j, settings).contains(&true),
+            !j.feasible,
+            "the criteria disagree with Planner::judge: {j:?}"
+        );
         v.both += usize::from(t && m);
         v.model_only += usize::from(m && !t);
         v.truth_only += usize::from(t && !m);
