@@ -66,8 +66,6 @@ struct Verdict {
     exp: f64,
     best: f64,
     mean: f64,
-    /// Whether the model calls any shove feasible (`best` and `mean` are then defined).
-    called: bool,
     /// Shoves: called feasible and true success, called feasible only, true success only.
     both: usize,
     model_only: usize,
@@ -217,7 +215,6 @@ fn verdict(
     // The earliest time with a feasible shove: its optimum and its average.
     let heading: Vec<f64> = judged.iter().map(|j| j.heading_error).collect();
     if let Some((pick, feasible)) = view.earliest_optimum(&heading) {
-        v.called = true;
         v.best = f64::from(u8::from(truth.success[pick]));
         v.mean =
             feasible.iter().filter(|&&i| truth.success[i]).count() as f64 / feasible.len() as f64;
@@ -253,12 +250,7 @@ fn main() {
         .get(3)
         .map_or("4dof,pinn,picopinn", String::as_str)
         .split(',')
-        .map(|k| {
-            serde_json::from_str(&format!("\"{k}\"")).unwrap_or_else(|_| {
-                eprintln!("MODELS: {k:?} is not one of 4dof, pinn, picopinn");
-                std::process::exit(2);
-            })
-        })
+        .map(|k| common::model_kind(k, "MODELS"))
         .collect();
     let steps = common::number(&args, 4, "STEPS", 3);
     let planner_settings = planner_settings(args.get(5).map_or("{}", String::as_str));
@@ -334,7 +326,8 @@ fn main() {
                 v.miss[2],
                 v.miss[3]
             );
-            called[i] += usize::from(v.called);
+            // The model calls some shove feasible iff `best` and `mean` are defined.
+            called[i] += usize::from(v.both + v.model_only > 0);
             sum.best += v.best;
             sum.mean += v.mean;
             sum.first += v.first;

@@ -275,12 +275,7 @@ fn main() {
     let first = common::number(&args, 1, "FIRST", 0);
     let count = common::number(&args, 2, "COUNT", 64);
     let threads = common::number(&args, 3, "THREADS", 2);
-    let replay_kind: Option<sim::episode::ModelKind> = args.get(4).map(|k| {
-        serde_json::from_str(&format!("\"{k}\"")).unwrap_or_else(|_| {
-            eprintln!("REPLAY: {k:?} is not one of 4dof, pinn, picopinn");
-            std::process::exit(2);
-        })
-    });
+    let replay_kind = args.get(4).map(|k| common::model_kind(k, "REPLAY"));
     let scenes = common::scenes(first, count);
     let dt = cfg.controller.mpc.dt;
     let runs = common::map_scenes(&scenes, threads, |sc| {

@@ -2,7 +2,7 @@
 //! map (each example uses some of them).
 #![allow(dead_code)]
 
-use sim::episode::PlanRecord;
+use sim::episode::{ModelKind, PlanRecord};
 use sim::Scenario;
 
 /// The `i`-th argument as a non-negative integer, `default` when absent; anything else
@@ -13,6 +13,15 @@ pub fn number(args: &[String], i: usize, name: &str, default: usize) -> usize {
             eprintln!("{name}: {s:?} is not a non-negative integer");
             std::process::exit(2);
         })
+    })
+}
+
+/// A target model's name (`4dof`, `pinn`, `picopinn`) given as argument `name`; anything
+/// else exits with code 2 naming the argument.
+pub fn model_kind(k: &str, name: &str) -> ModelKind {
+    serde_json::from_str(&format!("\"{k}\"")).unwrap_or_else(|_| {
+        eprintln!("{name}: {k:?} is not one of 4dof, pinn, picopinn");
+        std::process::exit(2);
     })
 }
 
