@@ -547,7 +547,8 @@ def plot_panels(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     ax.set_ylabel("episodes (%)")
     ax.set_ylim(0, 100)
     ax.set_title("B  failure composition (first cause)")
-    ax.legend(fontsize=8)
+    # Below the axes: inside, the legend hid the stacks it describes.
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, frameon=False)
     ax.tick_params(axis="x", labelrotation=15)
     # C: runtimes.
     ax = axes[2]
@@ -569,9 +570,13 @@ def plot_panels(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
     ax.yaxis.set_minor_formatter(FormatStrFormatter(""))
     ax.set_title("C  planning and control times")
-    ax.legend(fontsize=8)
+    shown = [v for n in names for k in ("plan", "ctrl") for v in
+             (summary[n].get(f"{k}_ms_median"), summary[n].get(f"{k}_ms_p99")) if v]
+    if shown:  # every bar from the same floor, and room for the legend above the 50 ms line
+        ax.set_ylim(0.5 * min(shown), 4.0 * max(max(shown), 50.0))
+    ax.legend(fontsize=8, loc="upper right", ncol=3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
 
 
