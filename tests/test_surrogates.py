@@ -21,7 +21,7 @@ from safetensors.numpy import load_file, save_file  # noqa: E402
 from picopit import _core, load_params_dict  # noqa: E402
 from picopit import datagen  # noqa: E402
 from picopit.cli import main  # noqa: E402
-from picopit.eval_surrogates import sliding  # noqa: E402
+from picopit.eval_surrogates import PLANNER_GRAVITY, planner_stop_decel_fraction, sliding, stop_points  # noqa: E402
 from picopit.compress import CompressConfig, TensorClusters, choose_threshold, compressed_model  # noqa: E402
 from picopit.physics import FourDof  # noqa: E402
 from picopit.surrogate_nn import (FEATURES, OUTPUTS, ModelFileError, apply_increments,  # noqa: E402
@@ -502,6 +502,9 @@ def test_pipeline_smoke(tiny_data, tmp_path, capsys):
     for m in res["models"].values():
         assert 0 <= m["sliding_windows"] <= m["rollout_windows"]
         assert m["rollout_final_speed_rmse_mps"] >= 0
+        if m["sliding_windows"]:
+            assert m["sliding_stop_point_rmse_m"] >= m["sliding_stop_point_median_m"] >= 0
+            assert math.isfinite(m["sliding_stop_reach_bias_m"])
     assert res["models"]["4dof"]["params"] == 0
     assert res["models"]["pinn"]["params"] == 11 * 64 + 64 + 2 * (64 * 64 + 64) + 64 * 8 + 8
     assert 56 < res["models"]["picopinn"]["params"] <= 812
@@ -521,6 +524,24 @@ def test_sliding_starts_are_spun_targets_moving():
                   [-4.0, 2.4, 0, 0, 0, 0, 0, 0],
                   [0.3, 0.5, 0, 0, 0, 0, 0, 0]])
     assert sliding(x).tolist() == [False, True, True, True, False]
+
+
+def test_stop_points_slide_on_along_the_velocity_at_the_planners_deceleration():
+    f = planner_stop_decel_fraction()
+    assert 0.0 < f <= 3.0
+    # state order vx, vy, psi, r, p, phi, X, Y
+    x = np.array([
+        [10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 5.0, 1.0],        # straight ahead along +X
+        [0.0, 6.0, 0.5 * np.pi, 0.0, 0.0, 0.0, 0.0, 0.0],  # sliding sideways, heading +Y: moves −X
+        [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 2.0, 3.0],          # at rest: stays
+    ])
+    mu = np.array([0.8, 0.3, 0.5])
+    p = stop_points(x, mu, f)
+    d0 = 10.0 ** 2 / (2 * f * 0.8 * PLANNER_GRAVITY)
+    d1 = 6.0 ** 2 / (2 * f * 0.3 * PLANNER_GRAVITY)
+    np.testing.assert_allclose(p, [[5.0 + d0, 1.0], [-d1, 0.0], [2.0, 3.0]], atol=1e-12)
+    # a lower μ slides further, in proportion
+    np.testing.assert_allclose(stop_points(x[:1], np.array([0.4]), f)[0, 0] - 5.0, 2 * d0)
 
 
 def test_cli_bad_input_exits_2_naming_the_problem(tmp_path, capsys):

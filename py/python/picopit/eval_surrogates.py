@@ -9,7 +9,11 @@ test episodes.
   error at the end, and the speed error at the end. The same end errors over the rollouts
   that start sliding (body slip |atan2(v_y, |v_x|)| above ``SLIDE_SLIP``, faster than
   ``SLIDE_SPEED``): a spun target, whose free slide the planner predicts when it decides
-  whether to let go (docs/RESULTS.md).
+  whether to let go (docs/RESULTS.md). For those, also the error of the stopping point the
+  planner's S_post row takes from the state at 2 s (the slide carried on at
+  ``stop_decel_fraction`` · μ g along the velocity, on a straight road): its RMSE and median, and its
+  mean reach bias (predicted minus true distance of the stop from the rollout's start;
+  positive: the model has the target slide further).
 
 Every model is given the episode's road μ: the Rust ``FourDofTarget`` at construction, the
 learned models (format version 3, μ is their last feature) through ``SurrogateModel.mu``. The
@@ -51,6 +55,26 @@ def sliding(x: np.ndarray) -> np.ndarray:
     and speed above ``SLIDE_SPEED``."""
     slip = np.abs(np.arctan2(x[..., 1], np.abs(x[..., 0])))
     return (slip > SLIDE_SLIP) & (_speed(x) > SLIDE_SPEED)
+
+
+PLANNER_GRAVITY = 9.81
+"""g (m/s²) in the planner's stopping-distance model (``crates/planner``)."""
+
+
+def planner_stop_decel_fraction() -> float:
+    """The planner's default ``stop_decel_fraction``: its S_post slide decelerates at this
+    fraction of μ g."""
+    import tomllib
+
+    return float(tomllib.loads(_core.Planner().settings_toml())["stop_decel_fraction"])
+
+
+def stop_points(x: np.ndarray, mu: np.ndarray, fraction: float) -> np.ndarray:
+    """Where targets in states ``x`` (B, 8) come to rest sliding on at ``fraction`` · μ g
+    along their velocity (the planner's stopping point on a straight road): (B, 2) world X, Y."""
+    c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
+    v = np.stack([x[:, 0] * c - x[:, 1] * s, x[:, 0] * s + x[:, 1] * c], axis=1)
+    return x[:, 6:8] + v * (np.hypot(v[:, 0], v[:, 1]) / (2.0 * fraction * np.maximum(mu, 0.05) * PLANNER_GRAVITY))[:, None]
 
 
 def wrap_angles(a: np.ndarray) -> np.ndarray:
@@ -178,6 +202,15 @@ def evaluate_model(m: _Batched, a: Mapping[str, np.ndarray], horizon: int, strid
     res["sliding_final_heading_rmse_rad"] = end_slide["heading_rmse_rad"]
     res["sliding_final_position_rmse_m"] = end_slide["position_rmse_m"]
     res["sliding_final_speed_rmse_mps"] = _rms(dv[slide])
+    f = planner_stop_decel_fraction()
+    mu0 = a["mu"][starts][slide]
+    pred_stop, true_stop = stop_points(x[slide], mu0, f), stop_points(true_end[slide], mu0, f)
+    origin = a["x"][starts][slide][:, 6:8]
+    stop_err = np.hypot(*(pred_stop - true_stop).T)
+    res["sliding_stop_point_rmse_m"] = _rms(stop_err)
+    res["sliding_stop_point_median_m"] = float(np.median(stop_err)) if stop_err.size else float("nan")
+    reach = np.hypot(*(pred_stop - origin).T) - np.hypot(*(true_stop - origin).T)
+    res["sliding_stop_reach_bias_m"] = float(reach.mean()) if reach.size else float("nan")
     res["rollout_heading_rmse_by_step"] = per_step_heading.tolist()
     res["rollout_windows"] = int(len(starts))
     res["eval_seconds"] = seconds
@@ -235,6 +268,9 @@ def markdown(res: Mapping[str, Any]) -> str:
         ("  heading error at 2 s, RMSE (rad)", "sliding_final_heading_rmse_rad", "{:.4f}"),
         ("  position error at 2 s, RMSE (m)", "sliding_final_position_rmse_m", "{:.3f}"),
         ("  speed error at 2 s, RMSE (m/s)", "sliding_final_speed_rmse_mps", "{:.3f}"),
+        ("  planner's stopping point, error RMSE (m)", "sliding_stop_point_rmse_m", "{:.2f}"),
+        ("  … median error (m)", "sliding_stop_point_median_m", "{:.2f}"),
+        ("  … mean reach bias, predicted − true (m)", "sliding_stop_reach_bias_m", "{:+.2f}"),
         ("step from Python (µs/call)", "step_us", "{:.1f}"),
         ("step+Jacobian from Python (µs/call)", "step_jac_us", "{:.1f}"),
         ("backend", "backend", "{}"),
