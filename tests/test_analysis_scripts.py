@@ -1,6 +1,7 @@
 """The analysis scripts over example outputs: scripts/oracle_surrogate.py counts what the
 lines say and refuses a malformed file naming the line; scripts/seed_scatter.sh tabulates the
-shipped pair for seed 0 and refuses bad arguments naming them."""
+shipped pair for seed 0 and refuses bad arguments naming them; scripts/reversal_split.py
+splits two runs into reaching the reversal and what follows, and names a malformed line."""
 import json
 import os
 import subprocess
@@ -172,3 +173,78 @@ done
     calls = log.read_text().splitlines()
     assert [c.split()[0] for c in calls] == ["train", "compress", "eval-surrogates"] * 2
     assert all("--seed 3" in c for c in calls if not c.startswith("eval"))
+
+
+SPLIT = ROOT / "scripts" / "reversal_split.py"
+
+
+def _episode(scene, outcome, impact, reversed_at):
+    imp = "-" if impact is None else f"x {impact[0]:.2f} y 0.80 v {impact[1]:.2f}"
+    rev = "-" if reversed_at is None else f"t {reversed_at:.2f} v 1.00"
+    return (f"{scene} curved high {outcome} at 6.00 s | herr 0.10 margin 0.20 contacts 1 | "
+            f"plan 0.01/ 0.01 ms (7) ctrl 0.01/ 0.02 ms | Done None | fail 0 budget 0 | "
+            f"wall 0.30 s | impact {imp} | reversed {rev}")
+
+
+def _trace(phases):
+    """A trace_episode output: (t, phase, heading deg, F_n) lines and two plan lines."""
+    lines = [f"t= {t:5.2f} {ph} Δs= -3.00 T: d=-1.50 ψ-h= {h:6.1f}° v= 9.00 | "
+             f"B: d= 0.20 ψ-h=  -8.0° v=10.00 | cmd (-0.100, -300.0) Fn= {fn:6.0f}"
+             for t, ph, h, fn in phases]
+    lines += ["plan t= 2.00 Pit push 3.05–3.85 s peak 9000 N, predicted heading error  0.10 rad",
+              "plan t= 3.10 Pit push 3.10–3.90 s peak 3000 N, predicted heading error  0.05 rad"]
+    return "\n".join(lines) + "\n"
+
+
+def test_reversal_split_counts_reversals_and_the_let_go(tmp_path):
+    a, b = tmp_path / "a.txt", tmp_path / "b.txt"
+    a.write_text("\n".join([
+        _episode("sc-00001", "success", (-1.5, 3.0), 5.0),
+        _episode("sc-00002", "boundary_violation Target", (-1.7, 2.0), 6.5),
+        _episode("sc-00003", "success", (-1.5, 3.0), 5.0),
+        _episode("sc-00004", "secondary_collision Target", None, None),
+    ]) + "\n")
+    b.write_text("\n".join([
+        _episode("sc-00001", "success", (-1.3, 3.4), 5.2),
+        _episode("sc-00002", "boundary_violation Target", (-1.5, 2.2), None),
+        _episode("sc-00003", "no_termination", (-1.5, 3.0), 5.5),
+        _episode("sc-00004", "success", (-1.5, 3.0), 4.0),
+    ]) + "\n")
+    r = subprocess.run([sys.executable, str(SPLIT), a, b, "--both-contacted"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["sc-00001", "sc-00002", "sc-00003"]
+    for d in ("ta", "tb"):
+        (tmp_path / d).mkdir()
+        for s in ("sc-00001", "sc-00002", "sc-00003"):
+            # pushes from 3.0 s, let go at 3.6 s having turned 40° (a) or 30° (b) at 100 or 50°/s
+            last = 40.0 if d == "ta" else 30.0
+            rate = 100.0 if d == "ta" else 50.0
+            (tmp_path / d / f"{s}.txt").write_text(_trace([
+                (2.90, "Chasing", 0.0, 0), (3.00, "Pit", 1.0, 9000), (3.50, "Pit", last - 0.1 * rate, 2000),
+                (3.60, "Stabilising", last, 0), (3.70, "Stabilising", last + 10, 0)]))
+    r = subprocess.run([sys.executable, str(SPLIT), a, b, "--traces", tmp_path / "ta", tmp_path / "tb"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rows = {}
+    for l in r.stdout.splitlines():
+        cells = [c.strip() for c in l.strip().strip("|").split("|")]
+        rows[cells[0]] = cells[1:]
+    assert rows["scenes brought into contact"] == ["3", "4"]
+    # of the three both touch, both reverse sc-00001 and sc-00003, only A sc-00002
+    key = next(k for k in rows if k.startswith("targets reversed of the 3 both touch"))
+    assert rows[key] == ["3 (2 / 1)", "2 (2 / 0)"]
+    # both reverse two; A saves both, B one
+    assert rows["successes among the 2 both reverse"] == ["2", "1"]
+    key = next(k for k in rows if k.startswith("at the let-go"))
+    assert rows[key] == ["40.0°, 100°/s, 0.60 s", "30.0°, 50°/s, 0.60 s"]
+    # the plan at 2.00 s was made before the first contact (3.00 s): only the 3000 N one counts
+    assert rows["mean peak force of the PIT plans made in contact"] == ["3000 N", "3000 N"]
+
+
+def test_reversal_split_refuses_a_malformed_line_naming_it(tmp_path):
+    a = tmp_path / "a.txt"
+    a.write_text(_episode("sc-00001", "success", (-1.5, 3.0), 5.0) + "\nsc-00002 curved high\n")
+    r = subprocess.run([sys.executable, str(SPLIT), a, a], capture_output=True, text=True)
+    assert r.returncode == 1 and f"{a}:2: not an episodes line" in r.stderr
+    r = subprocess.run([sys.executable, str(SPLIT), a.with_name("none.txt"), a], capture_output=True, text=True)
+    assert r.returncode == 1 and "none.txt" in r.stderr
