@@ -64,9 +64,9 @@ PLANNER_GRAVITY = 9.81
 def planner_stop_decel_fraction() -> float:
     """The planner's default ``stop_decel_fraction``: its S_post slide decelerates at this
     fraction of μ g."""
-    import tomllib
+    from . import _toml  # tomllib, or tomli before Python 3.11
 
-    return float(tomllib.loads(_core.Planner().settings_toml())["stop_decel_fraction"])
+    return float(_toml.loads(_core.Planner().settings_toml())["stop_decel_fraction"])
 
 
 def stop_points(x: np.ndarray, mu: np.ndarray, fraction: float) -> np.ndarray:
@@ -74,7 +74,8 @@ def stop_points(x: np.ndarray, mu: np.ndarray, fraction: float) -> np.ndarray:
     along their velocity (the planner's stopping point on a straight road): (B, 2) world X, Y."""
     c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
     v = np.stack([x[:, 0] * c - x[:, 1] * s, x[:, 0] * s + x[:, 1] * c], axis=1)
-    return x[:, 6:8] + v * (np.hypot(v[:, 0], v[:, 1]) / (2.0 * fraction * np.maximum(mu, 0.05) * PLANNER_GRAVITY))[:, None]
+    decel = fraction * np.maximum(mu, 0.05) * PLANNER_GRAVITY  # the planner's floor on μ too
+    return x[:, 6:8] + v * (np.hypot(v[:, 0], v[:, 1]) / (2.0 * decel))[:, None]
 
 
 def wrap_angles(a: np.ndarray) -> np.ndarray:
