@@ -102,20 +102,16 @@ def _p(a: int, b: int) -> float:
 def report(a: Dict[str, Episode], b: Dict[str, Episode], names: Tuple[str, str],
            traces: Optional[Tuple[Path, Path]] = None) -> str:
     common = sorted(set(a) & set(b))
+    if not common:
+        raise ValueError("the two runs have no scene in common")
     both = [s for s in common if a[s].impact and b[s].impact]
     rev_both = [s for s in both if a[s].reversed and b[s].reversed]
     rows = [("scenes", [str(len(common))] * 2)]
-    cells = []
-    for r in (a, b):
-        touched = [r[s].impact for s in common if r[s].impact]
-        cells.append(f"{len(touched)}" if touched else "0")
-    rows.append(("scenes brought into contact", cells))
-    cells = []
-    for r in (a, b):
-        touched = [r[s].impact for s in common if r[s].impact]
-        cells.append(f"{statistics.fmean(x for x, _ in touched):+.2f} m, {statistics.fmean(v for _, v in touched):.2f} m/s"
-                     if touched else "–")
-    rows.append(("first impact: point x on the target, closing speed (mean)", cells))
+    touched = [[r[s].impact for s in common if r[s].impact] for r in (a, b)]
+    rows.append(("scenes brought into contact", [str(len(t)) for t in touched]))
+    rows.append(("first impact: point x on the target, closing speed (mean)",
+                 [f"{statistics.fmean(x for x, _ in t):+.2f} m, {statistics.fmean(v for _, v in t):.2f} m/s"
+                  if t else "–" for t in touched]))
     only = [sum(1 for s in both if r[s].reversed and not o[s].reversed) for r, o in ((a, b), (b, a))]
     rows.append((f"targets reversed of the {len(both)} both touch (both / only this one; p = {_p(*only):.2g})",
                  [f"{sum(1 for s in both if r[s].reversed)} ({len(rev_both)} / {k})" for r, k in zip((a, b), only)]))

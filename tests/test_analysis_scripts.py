@@ -248,3 +248,8 @@ def test_reversal_split_refuses_a_malformed_line_naming_it(tmp_path):
     assert r.returncode == 1 and f"{a}:2: not an episodes line" in r.stderr
     r = subprocess.run([sys.executable, str(SPLIT), a.with_name("none.txt"), a], capture_output=True, text=True)
     assert r.returncode == 1 and "none.txt" in r.stderr
+    other = tmp_path / "other.txt"
+    other.write_text(_episode("sc-00009", "success", (-1.5, 3.0), 5.0) + "\n")
+    (tmp_path / "ok.txt").write_text(_episode("sc-00001", "success", (-1.5, 3.0), 5.0) + "\n")
+    r = subprocess.run([sys.executable, str(SPLIT), tmp_path / "ok.txt", other], capture_output=True, text=True)
+    assert r.returncode == 1 and "no scene in common" in r.stderr

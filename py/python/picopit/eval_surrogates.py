@@ -25,6 +25,7 @@ overhead), and per ``step_jac`` where the backend has it.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import time
@@ -61,9 +62,10 @@ PLANNER_GRAVITY = 9.81
 """g (m/s²) in the planner's stopping-distance model (``crates/planner``)."""
 
 
+@functools.lru_cache(maxsize=1)
 def planner_stop_decel_fraction() -> float:
     """The planner's default ``stop_decel_fraction``: its S_post slide decelerates at this
-    fraction of μ g."""
+    fraction of μ g (read once from a default planner)."""
     from . import _toml  # tomllib, or tomli before Python 3.11
 
     return float(_toml.loads(_core.Planner().settings_toml())["stop_decel_fraction"])
