@@ -48,7 +48,7 @@ def test_param_error_is_a_value_error_exported_at_top_level():
         ("contact", "friction", "friction = -0.4", "contact.friction"),
         ("target", "brake_bias_front", "brake_bias_front = 1.5", "target.brake_bias_front"),
         ("target", "mass", None, "mass"),  # missing field
-        ("contact", "damping", "damping = 0.3\nwobble = 2.0", "wobble"),  # unknown field
+        ("contact", "restitution", "restitution = 0.3\nwobble = 2.0", "wobble"),  # unknown field
     ],
 )
 def test_bad_field_raises_param_error_naming_it(param_file, table, key, line, expect):

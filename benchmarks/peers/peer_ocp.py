@@ -52,13 +52,8 @@ class AxleCurve:
     @staticmethod
     def control(tyre: Dict[str, float], fz_axle: float, mu: float) -> "AxleCurve":
         """``AxleCurve::control``: the Magic Formula at the static axle load, E = 0."""
-        fz = 0.5 * fz_axle
-        dfz = (fz - tyre["fz0"]) / tyre["fz0"]
-        mu_y = (mu / tyre["pdy1"]) * (tyre["pdy1"] + tyre["pdy2"] * dfz)
-        d = mu_y * fz_axle
-        x = fz / (tyre["pky2"] * tyre["fz0"])
-        ky = tyre["pky1"] * tyre["fz0"] * 2.0 * x / (1.0 + x * x)
-        k = 2.0 * ky
+        d = mu * fz_axle
+        k = tyre["pky1"] * fz_axle
         c = tyre["pcy1"]
         return AxleCurve(b=k / (c * d), c=c, d=d)
 

@@ -151,6 +151,33 @@ impl Plant {
         vec_out(py, &self.inner.target_state())
     }
 
+    /// The full state of one vehicle (`which`: "bullet" or "target"): `steer` (actual
+    /// road-wheel steer, rad), `torque` (actual drive torque T_r, N m), `brake` (actual
+    /// service-brake torque, N m), `omega` (wheel spin FL FR RL RR, rad/s), `fz` (wheel
+    /// loads, N), `roll` / `pitch` (rad) and `acc_body` (c.g. acceleration in the body
+    /// frame, m/s²) of the last step.
+    fn body<'py>(&self, py: Python<'py>, which: &str) -> PyResult<Bound<'py, PyDict>> {
+        let b = self.inner.body(which_arg(which)?);
+        let d = PyDict::new(py);
+        d.set_item("steer", b.steer)?;
+        d.set_item("torque", b.torque)?;
+        d.set_item("brake", b.brake)?;
+        d.set_item("omega", PyArray1::from_slice(py, &b.omega))?;
+        d.set_item("fz", PyArray1::from_slice(py, &b.fz))?;
+        d.set_item("roll", b.phi)?;
+        d.set_item("pitch", b.theta)?;
+        d.set_item("acc_body", PyArray1::from_slice(py, b.acc_body.as_slice()))?;
+        Ok(d)
+    }
+
+    /// Drive-torque command T_r (N m, motor side, before the gear) of one vehicle
+    /// (`which`: "bullet" or "target"); the actuator's limits and lag apply.
+    fn set_drive(&mut self, which: &str, torque: f64) -> PyResult<()> {
+        let torque = finite(torque, "torque")?;
+        self.inner.set_drive(which_arg(which)?, torque);
+        Ok(())
+    }
+
     /// The current bullet-target contact, or None: `fc` = [F_n, F_t] on the target in the
     /// contact frame, `gamma`, contact points (world, target body, bullet body), `depth`.
     fn contact<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
@@ -206,6 +233,16 @@ fn contact_dict<'py>(py: Python<'py>, c: &ContactReport) -> PyResult<Bound<'py, 
     )?;
     d.set_item("depth", c.depth)?;
     Ok(d)
+}
+
+fn which_arg(which: &str) -> PyResult<Which> {
+    match which {
+        "bullet" => Ok(Which::Bullet),
+        "target" => Ok(Which::Target),
+        other => Err(PyValueError::new_err(format!(
+            "which = {other:?}: must be \"bullet\" or \"target\""
+        ))),
+    }
 }
 
 fn non_negative(value: f64, name: &str) -> PyResult<f64> {

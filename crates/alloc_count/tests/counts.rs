@@ -37,6 +37,10 @@ fn counts_allocations_and_growth_but_not_plain_arithmetic() {
     barrier.wait();
     let here = allocations();
     barrier.wait();
-    assert_eq!(allocations(), here, "the other thread's allocations are not counted here");
+    assert_eq!(
+        allocations(),
+        here,
+        "the other thread's allocations are not counted here"
+    );
     assert_eq!(other.join().unwrap(), 100);
 }

@@ -226,21 +226,85 @@ fn point_segment_distance(p: Vec2, a: Vec2, b: Vec2) -> f64 {
     (p - (a + ab * t)).norm()
 }
 
-/// The compliant contact law: Hunt–Crossley normal force and regularised Coulomb friction,
+/// The compliant contact law: a linear crush spring with a viscous damper whose damping
+/// ratio gives a stated coefficient of restitution, and regularised Coulomb friction,
 ///
-/// `F_n = max(0, k δⁿ (1 + c δ̇))`, `F_t = −μ_c F_n tanh(v_t / v_s)`,
+/// `F_n = max(0, k δ + c δ̇)`, `c = 2 ζ(e) sqrt(k m_eff)`, `F_t = −μ_c F_n tanh(v_t / v_s)`,
 ///
-/// with δ the penetration, δ̇ its rate (positive while closing) and `v_t` the tangential
-/// slip velocity of B relative to A. The damping term is proportional to `δⁿ`, so the force
-/// is continuous at first touch and never pulls (the clamp), and the friction always
-/// opposes slip: over any closed contact the law dissipates energy, it never creates it.
+/// with δ the penetration, δ̇ its rate (positive while closing), `v_t` the tangential slip
+/// velocity of B relative to A and `m_eff` the effective mass of the pair along the normal
+/// at the contact point (impulse–momentum theory: `1/m_eff = nᵀ K (n + (F_t/F_n) t)`, `K`
+/// the pair's inverse inertia at the point, see [`effective_inverse_mass`]). A body of mass
+/// `m` meeting the law at any speed leaves it with the stated restitution `e`: the law is
+/// linear, so the rebound scales with the approach speed, and scaling the damper with
+/// `sqrt(k m_eff)` (the damping ratio ζ) makes `e` independent of the mass too. `ζ(e)` is
+/// the exact inverse of the clipped oscillator's restitution ([`restitution_of_damping_ratio`]):
+/// the force is clamped at zero, so the bodies part when `k δ + c δ̇` reaches zero, before
+/// δ does. The law never pulls and the friction always opposes slip: over any closed
+/// contact it dissipates energy, it never creates it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ContactLaw {
+    /// k (N/m).
     pub stiffness: f64,
-    pub exponent: f64,
-    pub damping: f64,
+    /// The stated coefficient of restitution e.
+    pub restitution: f64,
+    /// ζ(e), the damping ratio that gives it.
+    pub damping_ratio: f64,
     pub friction: f64,
     pub slip_speed: f64,
+}
+
+/// Restitution of a linear spring-damper that is clamped at zero force, for damping ratio
+/// ζ ∈ [0, 1) (under-damped): with `x'' + 2ζ x' + x = 0`, `x(0) = 0`, `x'(0) = 1`, the force
+/// `x + 2ζ x'` reaches zero at `ω_d t = π − atan(2ζ ω_d / (1 − 2ζ²))`, `ω_d = sqrt(1 − ζ²)`,
+/// and the rebound speed there is `e = −x'` (the angle taken with `atan2`, so past
+/// ζ = 1/√2 as well). (The unclamped oscillator's
+/// `exp(−πζ/ω_d)` is lower: it counts the pull the clamp removes.)
+#[must_use]
+pub fn restitution_of_damping_ratio(zeta: f64) -> f64 {
+    if zeta <= 0.0 {
+        return 1.0;
+    }
+    let wd = (1.0 - zeta * zeta).sqrt();
+    let theta = std::f64::consts::PI - (2.0 * zeta * wd).atan2(1.0 - 2.0 * zeta * zeta);
+    let (s, c) = theta.sin_cos();
+    -(-zeta * theta / wd).exp() * (c - zeta * s / wd)
+}
+
+/// The damping ratio ζ whose clamped spring-damper has restitution `e` ∈ (0, 1] (the
+/// inverse of [`restitution_of_damping_ratio`], by bisection over ζ ∈ [0, 0.999]; `e`
+/// below the law's floor there, ≈ 0.137, gives that limit).
+#[must_use]
+pub fn damping_ratio_for_restitution(e: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, 0.999);
+    if e >= 1.0 {
+        return 0.0;
+    }
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if restitution_of_damping_ratio(mid) > e {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// `nᵀ K d` for the pair's inverse-inertia matrix at a contact point, `K = (1/m_A + 1/m_B) I
+/// + Σ (ẑ × r_i)(ẑ × r_i)ᵀ / I_z,i`, with `r_i` the arms from each c.g. to the point
+/// (impulse–momentum theory, Brach 1983). A body of infinite mass (an obstacle) is left
+/// out by passing `inv_m = inv_iz = 0`. The normal velocity responds to a force
+/// `F_n (n + (F_t/F_n) t)` as `d(v_n)/dt = −nᵀ K (n + (F_t/F_n) t) F_n`, so with
+/// `d = n + (F_t/F_n) t` this is the inverse of the effective mass the damper sees.
+#[inline]
+#[must_use]
+pub fn effective_inverse_mass(normal: Vec2, direction: Vec2, bodies: [(f64, f64, Vec2); 2]) -> f64 {
+    let mut k = 0.0;
+    for (inv_m, inv_iz, arm) in bodies {
+        k += inv_m * normal.dot(&direction) + inv_iz * cross(arm, normal) * cross(arm, direction);
+    }
+    k
 }
 
 impl ContactLaw {
@@ -248,8 +312,8 @@ impl ContactLaw {
     pub fn from_params(p: &ContactParams) -> Self {
         Self {
             stiffness: p.stiffness,
-            exponent: p.exponent,
-            damping: p.damping,
+            restitution: p.restitution,
+            damping_ratio: damping_ratio_for_restitution(p.restitution),
             friction: p.friction,
             slip_speed: p.slip_speed,
         }
@@ -262,19 +326,22 @@ impl ContactLaw {
         self
     }
 
-    /// Normal force for penetration `depth` ≥ 0 and penetration rate `depth_rate`.
+    /// Damping coefficient c (N s/m) for a pair of effective mass `1 / inv_mass`.
     #[inline]
     #[must_use]
-    pub fn normal_force(&self, depth: f64, depth_rate: f64) -> f64 {
+    pub fn damping(&self, inv_mass: f64) -> f64 {
+        2.0 * self.damping_ratio * (self.stiffness / inv_mass).sqrt()
+    }
+
+    /// Normal force for penetration `depth` ≥ 0, penetration rate `depth_rate` and damping
+    /// coefficient `damping` ([`ContactLaw::damping`]).
+    #[inline]
+    #[must_use]
+    pub fn normal_force(&self, depth: f64, depth_rate: f64, damping: f64) -> f64 {
         if depth <= 0.0 {
             return 0.0;
         }
-        let spring = if self.exponent == 1.0 {
-            self.stiffness * depth
-        } else {
-            self.stiffness * depth.powf(self.exponent)
-        };
-        (spring * (1.0 + self.damping * depth_rate)).max(0.0)
+        (self.stiffness * depth + damping * depth_rate).max(0.0)
     }
 
     /// Tangential (friction) force on B for normal force `fn_` and slip velocity `vt`.
@@ -284,15 +351,29 @@ impl ContactLaw {
         -self.friction * fn_ * (vt / self.slip_speed).tanh()
     }
 
-    /// `f_c = [F_n, F_t]` on B from the geometry and the velocity of B's material point
-    /// relative to A's at the contact point.
+    /// `f_c = [F_n, F_t]` on B from the geometry, the velocity of B's material point
+    /// relative to A's at the contact point, and the bodies as `(1/m, 1/I_z, arm from the
+    /// c.g. to the contact point)` (zeros for an immovable obstacle).
     #[inline]
     #[must_use]
-    pub fn force(&self, geom: &ContactGeometry, v_rel: Vec2) -> Vec2 {
-        let depth_rate = -v_rel.dot(&geom.normal);
-        let fn_ = self.normal_force(geom.depth, depth_rate);
-        let ft = self.tangential_force(fn_, v_rel.dot(&geom.tangent()));
-        Vec2::new(fn_, ft)
+    pub fn force(
+        &self,
+        geom: &ContactGeometry,
+        v_rel: Vec2,
+        bodies: [(f64, f64, Vec2); 2],
+    ) -> Vec2 {
+        let n = geom.normal;
+        let t = geom.tangent();
+        let depth_rate = -v_rel.dot(&n);
+        let slip = -self.friction * (v_rel.dot(&t) / self.slip_speed).tanh();
+        // The friction ratio F_t/F_n is known before F_n, so the damper sees the pair's
+        // effective mass along the direction the contact force actually acts in. With
+        // body-panel friction it cannot vanish (|F_t/F_n| ≤ μ_c < 1 and K is positive
+        // definite), but keep it away from zero for degenerate arms.
+        let plain = effective_inverse_mass(n, n, bodies);
+        let inv_mass = effective_inverse_mass(n, n + t * slip, bodies).max(0.25 * plain);
+        let fn_ = self.normal_force(geom.depth, depth_rate, self.damping(inv_mass));
+        Vec2::new(fn_, slip * fn_)
     }
 }
 
@@ -400,18 +481,23 @@ mod tests {
         assert!((world.dot(&n) - 1000.0).abs() < 1e-9);
     }
 
-    #[test]
-    fn law_clamps_and_opposes_slip() {
-        let law = ContactLaw {
+    fn law(restitution: f64) -> ContactLaw {
+        ContactLaw::from_params(&ContactParams {
             stiffness: 4e5,
-            exponent: 1.0,
-            damping: 0.35,
+            restitution,
             friction: 0.4,
             slip_speed: 0.1,
-        };
-        assert_eq!(law.normal_force(0.0, 5.0), 0.0);
-        assert_eq!(law.normal_force(0.01, -10.0), 0.0, "never pulls");
-        assert!((law.normal_force(0.01, 0.0) - 4000.0).abs() < 1e-9);
+            obstacle_stiffness_factor: 2.0,
+        })
+    }
+
+    #[test]
+    fn law_clamps_and_opposes_slip() {
+        let law = law(0.3);
+        let c = law.damping(1.0 / 500.0);
+        assert_eq!(law.normal_force(0.0, 5.0, c), 0.0);
+        assert_eq!(law.normal_force(0.01, -10.0, c), 0.0, "never pulls");
+        assert!((law.normal_force(0.01, 0.0, c) - 4000.0).abs() < 1e-9);
         assert!(
             law.tangential_force(1000.0, 2.0) < 0.0 && law.tangential_force(1000.0, -2.0) > 0.0
         );
@@ -422,23 +508,87 @@ mod tests {
     }
 
     #[test]
+    fn damping_ratio_inverts_the_clamped_restitution() {
+        assert_eq!(restitution_of_damping_ratio(0.0), 1.0);
+        let mut last = 1.0;
+        for i in 1..96 {
+            let zeta = f64::from(i) * 0.01;
+            let e = restitution_of_damping_ratio(zeta);
+            assert!(e < last && e > 0.0, "monotone in ζ: {zeta} → {e}");
+            last = e;
+            assert!((damping_ratio_for_restitution(e) - zeta).abs() < 1e-9);
+        }
+        // Above the unclamped oscillator's restitution exp(−πζ/ω_d): the clamp takes away
+        // the pull that would have slowed the rebound.
+        let zeta: f64 = 0.36;
+        let unclamped = (-std::f64::consts::PI * zeta / (1.0 - zeta * zeta).sqrt()).exp();
+        assert!(restitution_of_damping_ratio(zeta) > unclamped);
+    }
+
+    /// One body of mass `m` driven into the law at `v0` (fine explicit steps); the rebound
+    /// speed over the approach speed.
+    fn one_body_restitution(law: &ContactLaw, m: f64, v0: f64) -> f64 {
+        let c = law.damping(1.0 / m);
+        let (mut x, mut v) = (0.0, v0);
+        let h = 1e-6;
+        loop {
+            let f = law.normal_force(x, v, c);
+            if v < 0.0 && (f == 0.0 || x <= 0.0) {
+                return -v / v0;
+            }
+            v -= f / m * h;
+            x += v * h;
+        }
+    }
+
+    #[test]
+    fn one_body_restitution_is_the_stated_value_at_any_speed_and_mass() {
+        for e in [0.2, 0.3, 0.45] {
+            let law = law(e);
+            for m in [150.0, 600.0, 2000.0] {
+                for v0 in [0.5, 1.0, 3.0, 6.0] {
+                    let got = one_body_restitution(&law, m, v0);
+                    assert!(
+                        (got - e).abs() < 2e-3,
+                        "e {e}, m {m}, v0 {v0}: measured {got}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn effective_mass_of_a_central_hit_is_the_reduced_mass() {
+        let n = Vec2::new(1.0, 0.0);
+        let k = effective_inverse_mass(
+            n,
+            n,
+            [
+                (1.0 / 1000.0, 1e-3, Vec2::zeros()),
+                (1.0 / 500.0, 1e-3, Vec2::zeros()),
+            ],
+        );
+        assert!((1.0 / k - 1000.0 * 500.0 / 1500.0).abs() < 1e-9);
+        // An off-centre hit is lighter: the arm adds (r × n)² / I_z.
+        let off = effective_inverse_mass(
+            n,
+            n,
+            [
+                (1.0 / 1000.0, 1e-3, Vec2::new(0.0, 2.0)),
+                (1.0 / 500.0, 1e-3, Vec2::zeros()),
+            ],
+        );
+        assert!((off - k - 4e-3).abs() < 1e-12);
+    }
+
+    #[test]
     fn law_never_creates_energy_over_closed_cycles() {
         // Prescribe closed penetration histories δ(t) ≥ 0 (in and out again) and integrate
         // the work the normal force does on the bodies, W = −∫ F_n dδ: it must be ≤ 0,
         // and = 0 without damping.
-        for (k, n, c) in [
-            (4e5, 1.0, 0.35),
-            (1e5, 1.5, 1.0),
-            (7e5, 1.0, 0.0),
-            (2e5, 1.3, 0.0),
-        ] {
-            let law = ContactLaw {
-                stiffness: k,
-                exponent: n,
-                damping: c,
-                friction: 0.4,
-                slip_speed: 0.1,
-            };
+        for e in [0.3, 1.0] {
+            let law = law(e);
+            let c = law.damping(1.0 / 400.0);
             for (amp, period, shape) in [(0.05, 0.15, 1.0), (0.1, 0.3, 3.0), (0.02, 0.05, 0.5)] {
                 let steps = 200_000;
                 let dt = period / f64::from(steps);
@@ -452,10 +602,10 @@ mod tests {
                     let t = (f64::from(i) + 0.5) * dt;
                     let h = 1e-9;
                     let ddepth = (depth_at(t + h) - depth_at(t - h)) / (2.0 * h);
-                    work -= law.normal_force(depth_at(t), ddepth) * ddepth * dt;
+                    work -= law.normal_force(depth_at(t), ddepth, c) * ddepth * dt;
                 }
-                let scale = k * amp.powf(n) * amp;
-                if c == 0.0 {
+                let scale = law.stiffness * amp * amp;
+                if e == 1.0 {
                     assert!(
                         work.abs() < 1e-6 * scale,
                         "elastic cycle must be lossless: {work}"

@@ -16,7 +16,7 @@
 //! Modules:
 //! * [`params`]: vehicle, tyre and contact parameter sets (TOML, validated).
 //! * [`geometry`]: 2-D poses and oriented rectangles.
-//! * [`tyre`]: the Magic Formula (pure and combined slip, load sensitivity).
+//! * [`tyre`]: the Magic Formula (pure and combined slip, CommonRoad's tyre form).
 //! * [`contact`]: separating-axis contact geometry, contact frame, force mapping,
 //!   compliant contact law.
 //! * [`road`]: roads (straight, arc, clothoid), Frenet projection, edge distances, obstacles.

@@ -12,54 +12,49 @@ use crate::GRAVITY;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// Magic Formula tyre coefficients (MF-Tyre naming, pure and combined slip, load
-/// sensitivity). Camber, shifts and aligning moment are not modelled.
+/// Magic Formula tyre coefficients (MF-Tyre naming, pure and combined slip), in the form
+/// CommonRoad's multi-body model evaluates them (Althoff & Würsching, "CommonRoad: Vehicle
+/// Models", 2020, tyre model from the ADAMS handbook): peak friction and slip stiffnesses
+/// proportional to the load (`D = μ F_z`, `K_x = p_Kx1 F_z`, `K_y = p_Ky1 F_z`). Camber,
+/// shifts and aligning moment are not modelled.
 ///
 /// Sign convention: all stiffness and friction coefficients are given as positive
 /// magnitudes; the model applies forces against the slip.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TyreParams {
-    /// Nominal load F_z0 (N).
-    pub fz0: f64,
     /// Longitudinal shape factor C_x.
     pub pcx1: f64,
-    /// Longitudinal friction μ_x at F_z0.
+    /// Longitudinal friction μ_x.
     pub pdx1: f64,
-    /// Variation of μ_x with load (per unit dfz).
-    pub pdx2: f64,
     /// Longitudinal curvature E_x.
     pub pex1: f64,
-    /// Longitudinal slip stiffness K_x / F_z at F_z0.
+    /// Longitudinal slip stiffness K_x / F_z.
     pub pkx1: f64,
-    /// Variation of K_x / F_z with load.
-    pub pkx2: f64,
-    /// Exponent in K_x / F_z with load.
-    pub pkx3: f64,
     /// Lateral shape factor C_y.
     pub pcy1: f64,
-    /// Lateral friction μ_y at F_z0.
+    /// Lateral friction μ_y.
     pub pdy1: f64,
-    /// Variation of μ_y with load (per unit dfz).
-    pub pdy2: f64,
     /// Lateral curvature E_y.
     pub pey1: f64,
-    /// Maximum cornering stiffness K_y / F_z0.
+    /// Cornering stiffness K_y / F_z (1/rad).
     pub pky1: f64,
-    /// Load (in units of F_z0) at which K_y peaks.
-    pub pky2: f64,
     /// Combined slip: slope factor of the F_x reduction with α.
     pub rbx1: f64,
     /// Combined slip: variation of that slope with κ.
     pub rbx2: f64,
     /// Combined slip: shape factor of the F_x reduction.
     pub rcx1: f64,
+    /// Combined slip: curvature factor of the F_x reduction.
+    pub rex1: f64,
     /// Combined slip: slope factor of the F_y reduction with κ.
     pub rby1: f64,
     /// Combined slip: variation of that slope with α.
     pub rby2: f64,
     /// Combined slip: shape factor of the F_y reduction.
     pub rcy1: f64,
+    /// Combined slip: curvature factor of the F_y reduction.
+    pub rey1: f64,
 }
 
 /// One vehicle: mass and inertia, geometry, suspension, wheels, drivetrain, actuators, tyres.
@@ -134,17 +129,17 @@ pub struct VehicleParams {
     pub tyre: TyreParams,
 }
 
-/// The compliant contact law between two bodies (Hunt–Crossley normal force, regularised
-/// Coulomb friction): `F_n = max(0, k δⁿ (1 + c δ̇))`, `F_t = −μ_c F_n tanh(v_t / v_s)`.
+/// The compliant contact law between two bodies ([`crate::contact::ContactLaw`]): a linear
+/// crush spring with a damper set by the coefficient of restitution,
+/// `F_n = max(0, k δ + 2 ζ(e) sqrt(k m_eff) δ̇)`, and regularised Coulomb friction
+/// `F_t = −μ_c F_n tanh(v_t / v_s)`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ContactParams {
-    /// k (N/mⁿ).
+    /// k (N/m).
     pub stiffness: f64,
-    /// n (−), 1 for a linear crush spring, 1.5 for Hertz.
-    pub exponent: f64,
-    /// c (s/m): Hunt–Crossley damping factor; c ≈ 1.5 (1 − e) / v_impact for restitution e.
-    pub damping: f64,
+    /// e: coefficient of restitution of a contact at any closing speed and mass, in [0.15, 1].
+    pub restitution: f64,
     /// μ_c: body-panel friction.
     pub friction: f64,
     /// v_s (m/s): slip speed of the friction regularisation.
@@ -282,10 +277,10 @@ macro_rules! rules {
 impl TyreParams {
     pub fn validate(&self, prefix: &str) -> Result<(), ParamError> {
         rules!(prefix, self, {
-            fz0: Positive, pcx1: Positive, pdx1: Positive, pdx2: Finite, pex1: AtMostOne,
-            pkx1: Positive, pkx2: Finite, pkx3: Finite, pcy1: Positive, pdy1: Positive,
-            pdy2: Finite, pey1: AtMostOne, pky1: Positive, pky2: Positive, rbx1: Positive,
-            rbx2: Finite, rcx1: Positive, rby1: Positive, rby2: Finite, rcy1: Positive,
+            pcx1: Positive, pdx1: Positive, pex1: AtMostOne, pkx1: Positive, pcy1: Positive,
+            pdy1: Positive, pey1: AtMostOne, pky1: Positive, rbx1: Positive, rbx2: Finite,
+            rcx1: Positive, rex1: AtMostOne, rby1: Positive, rby2: Finite, rcy1: Positive,
+            rey1: AtMostOne,
         });
         Ok(())
     }
@@ -297,13 +292,11 @@ impl TyreParams {
         road_mu / self.pdy1
     }
 
-    /// Load-dependent cornering stiffness K_y(F_z) (N/rad) of one tyre.
+    /// Cornering stiffness K_y(F_z) = p_Ky1 F_z (N/rad) of one tyre.
     #[inline]
     #[must_use]
     pub fn cornering_stiffness(&self, fz: f64) -> f64 {
-        // sin(2 atan x) = 2x / (1 + x²)
-        let x = fz / (self.pky2 * self.fz0);
-        self.pky1 * self.fz0 * 2.0 * x / (1.0 + x * x)
+        self.pky1 * fz
     }
 }
 
@@ -419,14 +412,14 @@ impl VehicleParams {
 impl ContactParams {
     pub fn validate(&self, prefix: &str) -> Result<(), ParamError> {
         rules!(prefix, self, {
-            stiffness: Positive, exponent: Positive, damping: NonNegative, friction: NonNegative,
+            stiffness: Positive, restitution: Positive, friction: NonNegative,
             slip_speed: Positive, obstacle_stiffness_factor: Positive,
         });
-        if !(1.0..=2.0).contains(&self.exponent) {
+        if !(0.15..=1.0).contains(&self.restitution) {
             return Err(ParamError::Invalid {
-                field: format!("{prefix}.exponent"),
-                value: self.exponent,
-                reason: "must lie in [1, 2]",
+                field: format!("{prefix}.restitution"),
+                value: self.restitution,
+                reason: "must lie in [0.15, 1] (a damped linear spring gives no less)",
             });
         }
         Ok(())
@@ -531,8 +524,8 @@ mod tests {
             ),
             (
                 "contact",
-                "damping",
-                Some("damping = -1.0\nwobble = 2.0"),
+                "restitution",
+                Some("restitution = -1.0\nwobble = 2.0"),
                 "wobble",
             ),
             (

@@ -8,9 +8,9 @@
 //! * load transfer to four wheels from the suspension moments plus the unsprung and
 //!   roll-centre terms;
 //! * four wheels with spin dynamics (drive torque through an open differential, Coulomb
-//!   brake and rolling-resistance torque, an implicit update that stays stable down to
-//!   standstill);
-//! * Magic Formula tyres with combined slip and load sensitivity ([`crate::tyre`]);
+//!   brake and rolling-resistance torque, an implicit update solved together with the
+//!   chassis speed, so braking does not depend on the step and stays stable to standstill);
+//! * Magic Formula tyres with combined slip, CommonRoad's tyre of the vehicle ([`crate::tyre`]);
 //! * aerodynamic drag; actuators with limits, rate limits and first-order lags.
 //!
 //! The two bodies touch through the compliant contact of [`crate::contact`] between their
@@ -650,7 +650,11 @@ impl Plant {
                 if let Some(geom) = obb_contact(&fps[i], &ofp) {
                     // Normal from the vehicle into the obstacle; the obstacle is body B.
                     let v_rel = v_obs - self.body_point_velocity(i, geom.point);
-                    let fc = self.obstacle_law.force(&geom, v_rel);
+                    let fc = self.obstacle_law.force(
+                        &geom,
+                        v_rel,
+                        [self.inertia_at(i, geom.point), (0.0, 0.0, Vec2::zeros())],
+                    );
                     let f_world = rotate(geom.gamma(), fc);
                     ext[i].add(-f_world, geom.point, self.bodies[i].pos);
                     let stronger = self.obstacle_contacts[i].is_none_or(|c| c.normal_force < fc.x);
@@ -676,7 +680,14 @@ impl Plant {
         let (bullet, target) = (&self.bodies[0], &self.bodies[1]);
         let v_rel =
             self.body_point_velocity(1, geom.point) - self.body_point_velocity(0, geom.point);
-        let fc = self.law.force(geom, v_rel);
+        let fc = self.law.force(
+            geom,
+            v_rel,
+            [
+                self.inertia_at(0, geom.point),
+                self.inertia_at(1, geom.point),
+            ],
+        );
         let gamma = geom.gamma();
         let f_world = rotate(gamma, fc);
         ext[1].add(f_world, geom.point, target.pos);
@@ -689,6 +700,13 @@ impl Plant {
             point_in_bullet: rotate(-bullet.yaw, geom.point - bullet.pos),
             depth: geom.depth,
         }
+    }
+
+    /// `(1/m, 1/I_z, arm from the c.g. to p)` of vehicle `i`, for the contact law.
+    #[inline]
+    fn inertia_at(&self, i: usize, p: Vec2) -> (f64, f64, Vec2) {
+        let c = &self.chassis[i];
+        (c.inv_m, c.inv_iz, p - self.bodies[i].pos)
     }
 
     fn accumulate(&mut self, r: &ContactReport, dt: f64) {
@@ -759,6 +777,25 @@ fn lag_factor(dt: f64, tau: f64) -> f64 {
     }
 }
 
+/// Velocities of the four wheel centres (FL, FR, RL, RR) in their wheel frames (the front
+/// wheels steered by δ, given as `sin δ`, `cos δ`).
+#[inline]
+fn wheel_velocities(c: &Chassis, b: &VehicleBody, sd: f64, cd: f64) -> [Vec2; 4] {
+    let e = c.cg_offset(b);
+    let e_dot = c.cg_rate(b);
+    // Velocity of the chassis origin in the body frame.
+    let v_o = b.vel_body() - e_dot - Vec2::new(-b.r * e.y, b.r * e.x);
+    std::array::from_fn(|w| {
+        let pos = c.wheel_pos[w];
+        let v = Vec2::new(v_o.x - b.r * pos.y, v_o.y + b.r * pos.x);
+        if w < 2 {
+            Vec2::new(cd * v.x + sd * v.y, -sd * v.x + cd * v.y)
+        } else {
+            v
+        }
+    })
+}
+
 /// One semi-implicit Euler step of one vehicle.
 #[allow(clippy::too_many_lines)]
 fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, tyres: bool) {
@@ -766,10 +803,9 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
     let to_body = |v: Vec2| Vec2::new(co * v.x + s * v.y, -s * v.x + co * v.y);
     let to_world = |v: Vec2| Vec2::new(co * v.x - s * v.y, s * v.x + co * v.y);
     let e = c.cg_offset(b);
-    let e_dot = c.cg_rate(b);
     let v_cg = to_body(b.vel);
-    // Velocity of the chassis origin in the body frame.
-    let v_o = v_cg - e_dot - Vec2::new(-b.r * e.y, b.r * e.x);
+    let (sd, cd) = b.steer.sin_cos();
+    let v_wheel = wheel_velocities(c, b, sd, cd);
 
     // Wheel loads: static + pitch/roll suspension moments + unsprung / roll-centre terms
     // (with the last step's c.g. acceleration).
@@ -787,7 +823,6 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
     ];
 
     // Tyre forces.
-    let (sd, cd) = b.steer.sin_cos();
     let mut f_body = Vec2::zeros();
     let mut m_z = 0.0;
     let mut fx_wheel = [0.0; 4];
@@ -798,13 +833,7 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
         let mut alpha = [0.0; 4];
         let mut denom = [0.0; 4];
         for w in 0..4 {
-            let pos = c.wheel_pos[w];
-            let v = Vec2::new(v_o.x - b.r * pos.y, v_o.y + b.r * pos.x);
-            let vw = if w < 2 {
-                Vec2::new(cd * v.x + sd * v.y, -sd * v.x + cd * v.y)
-            } else {
-                v
-            };
+            let vw = v_wheel[w];
             denom[w] = vw.x.abs().max(V_LOW);
             kappa[w] = (b.omega[w] * c.rw - vw.x) / denom[w];
             alpha[w] = tan_slip(vw.x, vw.y);
@@ -855,13 +884,24 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
     b.yaw += b.r * dt;
     b.pos += b.vel * dt;
 
-    // Wheel spin: implicit in the tyre's slip stiffness (stable to standstill), Coulomb
-    // brake and rolling-resistance torque.
+    // Wheel spin, implicit in the tyre's slip stiffness and solved together with the
+    // chassis: the longitudinal force is linearised in the slip velocity ω R_w − v_x,
+    // `F_x(t + dt) ≈ F_x + K (R_w Δω − Δv_x)` with `K = K_x / max(|v_x|, V_LOW)`, and the
+    // wheel's ground speed change Δv_x over this step (the chassis has just been updated)
+    // enters the balance. Without that term the wheel lags the decelerating chassis by
+    // one step, which at low speed (large K) under-brakes by a time-step-dependent amount.
+    // Then the Coulomb brake and rolling-resistance torque (stable to standstill).
+    let v_wheel_new = if tyres {
+        wheel_velocities(c, b, sd, cd)
+    } else {
+        v_wheel
+    };
     let drive_wheel = 0.5 * c.drive_gain * b.torque;
     for w in 0..4 {
         let drive = if w >= 2 { drive_wheel } else { 0.0 };
         let i_eff = c.iw + dt * c.rw * c.rw * kx_over_v[w];
-        let omega_free = b.omega[w] + dt * (drive - c.rw * fx_wheel[w]) / i_eff;
+        let ground = c.rw * kx_over_v[w] * (v_wheel_new[w].x - v_wheel[w].x);
+        let omega_free = b.omega[w] + dt * (drive - c.rw * fx_wheel[w] + ground) / i_eff;
         let coulomb = c.brake_share[w] * b.brake + c.rolling_resistance * fz[w] * c.rw;
         let cap = dt * coulomb / i_eff;
         b.omega[w] = if omega_free.abs() <= cap {

@@ -1,4 +1,5 @@
-//! The Magic Formula tyre model (Pacejka), pure and combined slip with load sensitivity.
+//! The Magic Formula tyre model (Pacejka), pure and combined slip, in the form CommonRoad's
+//! multi-body model evaluates it: peak friction and slip stiffnesses proportional to the load.
 //!
 //! Slip conventions (ours, uniform across the crate):
 //! * longitudinal slip `κ = (ω R_w − v_x) / max(|v_x|, v_low)`, force `F_x = +MF_x(κ)`;
@@ -75,11 +76,8 @@ impl AxleCurve {
     /// adhesion `mu`. Peak `D = μ_y F_z,axle`, cornering stiffness `2 K_y(F_z,axle / 2)`.
     #[must_use]
     pub fn new(tyre: &TyreParams, fz_axle: f64, mu: f64) -> Self {
-        let fz = 0.5 * fz_axle;
-        let dfz = (fz - tyre.fz0) / tyre.fz0;
-        let mu_y = tyre.mu_scale(mu) * (tyre.pdy1 + tyre.pdy2 * dfz);
-        let d = mu_y * fz_axle;
-        let k = 2.0 * tyre.cornering_stiffness(fz);
+        let d = tyre.mu_scale(mu) * tyre.pdy1 * fz_axle;
+        let k = tyre.cornering_stiffness(fz_axle);
         let c = tyre.pcy1;
         Self {
             b: k / (c * d),
@@ -141,8 +139,8 @@ pub struct TyreForces {
     pub kx: f64,
 }
 
-/// Magic Formula with combined slip and load sensitivity (MF-Tyre 5.2 / 6.1 structure
-/// without camber, shifts or aligning moment).
+/// Magic Formula with combined slip (MF-Tyre 5.2 structure as CommonRoad's multi-body
+/// model evaluates it, without camber, shifts or aligning moment).
 ///
 /// `kappa` is the longitudinal slip κ and `alpha` the lateral slip *as MF-Tyre evaluates
 /// it*: `α* = tan α` (the plant passes `v_y / sqrt(v_x² + V_LOW²)` in the wheel frame, see
@@ -150,38 +148,39 @@ pub struct TyreForces {
 /// saturated force. The force opposes the slip: `F_y = −MF_y(α*)`.
 ///
 /// Combined slip uses the cosine weighting functions
-/// `G_xα = cos(r_Cx1 atan(B_xα α))`, `B_xα = r_Bx1 cos(atan(r_Bx2 κ))` and
-/// `G_yκ = cos(r_Cy1 atan(B_yκ κ))`, `B_yκ = r_By1 cos(atan(r_By2 α))`;
+/// `G_xα = cos(r_Cx1 atan(B_xα α − r_Ex1 (B_xα α − atan(B_xα α))))`,
+/// `B_xα = r_Bx1 cos(atan(r_Bx2 κ))` and the same for `G_yκ` with `r_Cy1`, `r_Ey1` and
+/// `B_yκ = r_By1 cos(atan(r_By2 α))`;
 /// the weighting's argument is capped at π/2 so that a tyre sliding at large slip keeps
 /// a non-negative force share (the fitted weighting goes negative far outside its data).
 #[inline(always)]
 #[must_use]
 pub fn combined_slip(t: &TyreParams, mu_scale: f64, fz: f64, kappa: f64, alpha: f64) -> TyreForces {
     use std::f64::consts::FRAC_PI_2;
-    // Branch-free so that `combined_slip4` vectorises: evaluate at a load of at least 1 N
-    // and scale the forces back, which gives exactly zero force for a lifted wheel.
-    let fz_eval = fz.max(1.0);
-    let scale = fz.max(0.0) / fz_eval;
-    let dfz = (fz_eval - t.fz0) / t.fz0;
+    // Every force is proportional to the load, so the curves are evaluated per newton of
+    // load (a lifted wheel, F_z ≤ 0, carries nothing). Branch-free so that
+    // `combined_slip4` vectorises.
+    let load = fz.max(0.0);
     // Pure longitudinal slip.
-    let kx = fz_eval * (t.pkx1 + t.pkx2 * dfz) * (t.pkx3 * dfz).exp();
-    let dx = mu_scale * (t.pdx1 + t.pdx2 * dfz).max(0.05) * fz_eval;
-    let bx = kx / (t.pcx1 * dx);
-    let fx0 = magic_formula(kappa, bx, t.pcx1, dx, t.pex1);
+    let dx = mu_scale * t.pdx1;
+    let fx0 = magic_formula(kappa, t.pkx1 / (t.pcx1 * dx), t.pcx1, dx, t.pex1);
     // Pure lateral slip.
-    let ky = t.cornering_stiffness(fz_eval);
-    let dy = mu_scale * (t.pdy1 + t.pdy2 * dfz).max(0.05) * fz_eval;
-    let by = ky / (t.pcy1 * dy);
-    let fy0 = -magic_formula(alpha, by, t.pcy1, dy, t.pey1);
-    // Combined-slip weighting.
+    let dy = mu_scale * t.pdy1;
+    let fy0 = -magic_formula(alpha, t.pky1 / (t.pcy1 * dy), t.pcy1, dy, t.pey1);
+    // Combined-slip weighting (odd in its argument, so evaluated on the magnitude).
+    let shape = |x: f64, e: f64| x - e * (x - x.atan());
     let bxa = t.rbx1 / (1.0 + (t.rbx2 * kappa).powi(2)).sqrt();
-    let gxa = (t.rcx1 * (bxa * alpha).abs().atan()).min(FRAC_PI_2).cos();
+    let gxa = (t.rcx1 * shape((bxa * alpha).abs(), t.rex1).atan())
+        .min(FRAC_PI_2)
+        .cos();
     let byk = t.rby1 / (1.0 + (t.rby2 * alpha).powi(2)).sqrt();
-    let gyk = (t.rcy1 * (byk * kappa).abs().atan()).min(FRAC_PI_2).cos();
+    let gyk = (t.rcy1 * shape((byk * kappa).abs(), t.rey1).atan())
+        .min(FRAC_PI_2)
+        .cos();
     TyreForces {
-        fx: fx0 * gxa * scale,
-        fy: fy0 * gyk * scale,
-        kx: kx * scale,
+        fx: fx0 * gxa * load,
+        fy: fy0 * gyk * load,
+        kx: t.pkx1 * load,
     }
 }
 
@@ -210,6 +209,9 @@ mod tests {
     fn tyre() -> TyreParams {
         ParamSet::builtin("full_size").unwrap().target.tyre
     }
+
+    /// A wheel load (N): the full-size car's static load per wheel.
+    const FZ: f64 = 2680.0;
 
     #[test]
     fn mf_peak_equals_d_and_slope_equals_bcd() {
@@ -249,8 +251,8 @@ mod tests {
     fn tyre_peak_and_stiffness_follow_parameters() {
         let t = tyre();
         let mu = 0.9;
-        let fz = t.fz0;
-        // Lateral: initial slope equals K_y, peak equals μ F_z at nominal load.
+        let fz = FZ;
+        // Lateral: initial slope equals K_y, peak equals μ F_z.
         let h = 1e-7;
         let f = |a: f64| combined_slip(&t, t.mu_scale(mu), fz, 0.0, a).fy;
         let slope = -(f(h) - f(-h)) / (2.0 * h);
@@ -264,22 +266,33 @@ mod tests {
             "peak {peak} vs {}",
             mu * fz
         );
-        // Longitudinal: initial slope equals K_x = p_kx1 F_z at nominal load.
+        // Longitudinal: initial slope equals K_x = p_kx1 F_z .
         let g = |k: f64| combined_slip(&t, t.mu_scale(mu), fz, k, 0.0).fx;
         let kslope = (g(h) - g(-h)) / (2.0 * h);
         assert!((kslope - t.pkx1 * fz).abs() / (t.pkx1 * fz) < 1e-6);
     }
 
     #[test]
-    fn load_sensitivity_is_degressive() {
+    fn forces_scale_with_load_as_in_commonroad() {
+        // CommonRoad's tyre: D = μ F_z, K = p_K1 F_z, so every force is proportional to
+        // the load at any slip; cross-check one point against the Magic Formula written
+        // out from CommonRoad's formula (pure lateral slip, κ = 0).
         let t = tyre();
         let s = t.mu_scale(1.0);
-        let f1 = -combined_slip(&t, s, t.fz0, 0.0, 0.3).fy / t.fz0;
-        let f2 = -combined_slip(&t, s, 2.0 * t.fz0, 0.0, 0.3).fy / (2.0 * t.fz0);
-        assert!(
-            f2 < f1,
-            "friction per unit load must fall with load: {f1} {f2}"
-        );
+        for (kappa, alpha) in [(0.0, 0.3), (0.05, 0.02), (-0.2, -0.1)] {
+            let f1 = combined_slip(&t, s, FZ, kappa, alpha);
+            let f2 = combined_slip(&t, s, 2.0 * FZ, kappa, alpha);
+            assert!((f2.fx - 2.0 * f1.fx).abs() < 1e-9 * f1.fx.abs().max(1.0));
+            assert!((f2.fy - 2.0 * f1.fy).abs() < 1e-9 * f1.fy.abs().max(1.0));
+        }
+        let (fz, alpha): (f64, f64) = (3000.0, 0.1);
+        let (c, d, e): (f64, f64, f64) = (1.3507, 1.0489 * fz, -0.0074722);
+        let b = 21.92 * fz / (c * d);
+        let bx = b * alpha;
+        let expect = d * (c * (bx - e * (bx - bx.atan())).atan()).sin();
+        // λ_μ = 1: CommonRoad's tyre as published (road μ = p_dy1).
+        let got = -combined_slip(&t, 1.0, fz, 0.0, alpha).fy;
+        assert!((got - expect).abs() < 1e-9 * expect, "{got} vs {expect}");
     }
 
     #[test]
@@ -287,16 +300,16 @@ mod tests {
         let t = tyre();
         let s = t.mu_scale(0.9);
         let alpha = 0.05;
-        let pure = combined_slip(&t, s, t.fz0, 0.0, alpha).fy.abs();
+        let pure = combined_slip(&t, s, FZ, 0.0, alpha).fy.abs();
         let mut last = pure;
         for &k in &[0.02, 0.05, 0.1, 0.3] {
-            let fy = combined_slip(&t, s, t.fz0, k, alpha).fy.abs();
+            let fy = combined_slip(&t, s, FZ, k, alpha).fy.abs();
             assert!(fy < last, "|Fy| must fall as κ grows: κ={k} {fy} ≥ {last}");
             last = fy;
         }
         // And lateral slip reduces the longitudinal force.
-        let fx0 = combined_slip(&t, s, t.fz0, 0.05, 0.0).fx;
-        let fx1 = combined_slip(&t, s, t.fz0, 0.05, 0.1).fx;
+        let fx0 = combined_slip(&t, s, FZ, 0.05, 0.0).fx;
+        let fx1 = combined_slip(&t, s, FZ, 0.05, 0.1).fx;
         assert!(fx1 < fx0 && fx1 > 0.0);
     }
 
@@ -304,7 +317,7 @@ mod tests {
     fn four_lanes_match_scalar_and_lifted_wheels_carry_nothing() {
         let t = tyre();
         let s = t.mu_scale(0.7);
-        let fz = [0.0, 0.5 * t.fz0, t.fz0, 2.5 * t.fz0];
+        let fz = [0.0, 0.5 * FZ, FZ, 2.5 * FZ];
         let kappa = [0.1, -0.05, 0.0, 0.4];
         let alpha = [0.2, 0.0, -0.3, 1.4];
         let four = combined_slip4(&t, s, &fz, &kappa, &alpha);
@@ -318,8 +331,8 @@ mod tests {
     #[test]
     fn control_curve_keeps_stiffness_and_peak() {
         let t = tyre();
-        let full = AxleCurve::new(&t, 2.0 * t.fz0, 0.8);
-        let ctrl = AxleCurve::control(&t, 2.0 * t.fz0, 0.8);
+        let full = AxleCurve::new(&t, 2.0 * FZ, 0.8);
+        let ctrl = AxleCurve::control(&t, 2.0 * FZ, 0.8);
         assert_eq!(full.cornering_stiffness(), ctrl.cornering_stiffness());
         let peak = |c: &AxleCurve| {
             (0..20_000)
@@ -342,9 +355,9 @@ mod tests {
     #[test]
     fn axle_curve_matches_tyres() {
         let t = tyre();
-        let fz_axle = 2.0 * t.fz0;
+        let fz_axle = 2.0 * FZ;
         let axle = AxleCurve::new(&t, fz_axle, 0.8);
-        let two = 2.0 * combined_slip(&t, t.mu_scale(0.8), t.fz0, 0.0, 0.07).fy;
+        let two = 2.0 * combined_slip(&t, t.mu_scale(0.8), FZ, 0.0, 0.07).fy;
         assert!((axle.force(0.07) - two).abs() < 1e-9 * two.abs());
     }
 }

@@ -1,10 +1,10 @@
 //! The plant's step allocates nothing once built (it runs inside the 1 kHz loop of
 //! pit-vehicle and millions of times per benchmark).
 
+use alloc_count::{allocations, CountingAlloc};
 use dynamics::params::ParamSet;
 use dynamics::plant::{Plant, PlantConfig, VehicleInit};
 use dynamics::road::Obstacle;
-use alloc_count::{allocations, CountingAlloc};
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;

@@ -1435,8 +1435,18 @@ impl AssemblyView<'_> {
             let (ts_steer, ts_torque) = (s.trust_steer * trust, s.trust_torque * trust);
             let (cu, ct) = (c0 + l.o_u, c0 + l.o_u + 1);
             let steer_max = self.lim.steer_at(self.lin.xb[k][dynamics::bullet::idx::VX]);
-            row(e, b, &[(cu, 1.0)], (steer_max - u[0]).min(ts_steer).max(0.0));
-            row(e, b, &[(cu, -1.0)], (steer_max + u[0]).min(ts_steer).max(0.0));
+            row(
+                e,
+                b,
+                &[(cu, 1.0)],
+                (steer_max - u[0]).min(ts_steer).max(0.0),
+            );
+            row(
+                e,
+                b,
+                &[(cu, -1.0)],
+                (steer_max + u[0]).min(ts_steer).max(0.0),
+            );
             row(
                 e,
                 b,

@@ -7,14 +7,13 @@
 
 mod common;
 
+use alloc_count::{allocations, CountingAlloc};
 use common::*;
 use dynamics::road::Obstacle;
 use mpc::{MpcSettings, ScpMode};
-use alloc_count::{allocations, CountingAlloc};
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;
-
 
 #[test]
 fn the_control_step_allocates_nothing() {

@@ -2,17 +2,16 @@
 //! layer's replans, the MPC, the phase machine) over a closed-loop PIT on the plant, from
 //! chasing through contact (a counting global allocator).
 
+use alloc_count::{allocations, CountingAlloc};
 use dynamics::params::ParamSet;
 use dynamics::plant::{Plant, PlantConfig, VehicleInit};
 use dynamics::road::{Obstacle, Road};
 use dynamics::target4dof::FourDofTarget;
 use dynamics::TargetInput;
 use planner::{ControllerInput, ControllerSettings, Phase, PitController};
-use alloc_count::{allocations, CountingAlloc};
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;
-
 
 #[test]
 fn the_controller_step_allocates_nothing() {

@@ -13,9 +13,10 @@ const SHOVES: [f64; 6] = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0];
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let config = args
-        .first()
-        .map_or(r#"{"preset":"picopinn","clock":"simulated"}"#, String::as_str);
+    let config = args.first().map_or(
+        r#"{"preset":"picopinn","clock":"simulated"}"#,
+        String::as_str,
+    );
     let first: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(0);
     let count: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(192);
     let threads: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(2).max(1);
@@ -111,5 +112,8 @@ fn main() {
     println!("  of the failed: a shove at the controller's time would have saved it on its side {}, only on the other side {}, on neither but earlier {}, never near or before {}",
         c(&|b| b[1]), c(&|b| !b[1] && b[2]), c(&|b| !b[1] && !b[2] && b[3]), c(&|b| !b[1] && !b[2] && !b[3]));
     let okc = lines.iter().filter(|l| l.2[0]).count();
-    println!("  of the {okc} successes: a shove on the same side would have saved it {}", lines.iter().filter(|l| l.2[0] && l.2[1]).count());
+    println!(
+        "  of the {okc} successes: a shove on the same side would have saved it {}",
+        lines.iter().filter(|l| l.2[0] && l.2[1]).count()
+    );
 }

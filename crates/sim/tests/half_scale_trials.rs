@@ -72,16 +72,32 @@ fn r1_turns_the_target_safely_with_a_sane_impact() {
     );
     // The first touch lands on the target's rear half, on its side rather than its rear
     // face (at this scale it lands 0.18 m ahead of the rear axle, not behind it).
-    let t = sim::scenario::ParamSetName::HalfScale.load().unwrap().target;
+    let t = sim::scenario::ParamSetName::HalfScale
+        .load()
+        .unwrap()
+        .target;
     let [x, y] = m.impact_point.expect("R1 makes contact");
     let rear = t.cg_to_front - t.length;
-    assert!(rear - 0.02 < x && x < 0.0, "impact x {x} m (rear bumper {rear})");
-    assert!(y.abs() > 0.4 * t.width && y.abs() < 0.5 * t.width + 0.05, "impact y {y} m, width {}", t.width);
+    assert!(
+        rear - 0.02 < x && x < 0.0,
+        "impact x {x} m (rear bumper {rear})"
+    );
+    assert!(
+        y.abs() > 0.4 * t.width && y.abs() < 0.5 * t.width + 0.05,
+        "impact y {y} m, width {}",
+        t.width
+    );
     // Reversed (within ε_ψ) at some point: the reversal time and the speed kept through the spin.
     if let (Some(tr), Some(vr)) = (m.reversed_at, m.reversed_speed) {
         let v0 = case("R1").target.vx;
-        assert!(tr > 0.0 && tr <= m.decided_at.unwrap() + 1e-9, "reversed at {tr} s");
-        assert!((0.0..v0).contains(&vr), "speed {vr} m/s at reversal from {v0} m/s");
+        assert!(
+            tr > 0.0 && tr <= m.decided_at.unwrap() + 1e-9,
+            "reversed at {tr} s"
+        );
+        assert!(
+            (0.0..v0).contains(&vr),
+            "speed {vr} m/s at reversal from {v0} m/s"
+        );
     }
 }
 

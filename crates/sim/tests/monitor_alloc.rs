@@ -3,10 +3,10 @@
 
 mod common;
 
+use alloc_count::{allocations, CountingAlloc};
 use dynamics::plant::{Plant, PlantConfig};
 use sim::outcome::Monitor;
 use sim::scenario::Scenario;
-use alloc_count::{allocations, CountingAlloc};
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;

@@ -63,7 +63,11 @@ fn a_target_reversed_and_at_rest_succeeds_after_the_dwell() {
     assert!(me.min_margin > 0.0 && !me.boundary_violation && !me.secondary_collision);
     // First within ε_ψ of π while still spinning: ψ = 0.9 π at t = 0.9 s (error 0.31 rad),
     // at 5 m/s; the later observations do not overwrite it.
-    assert!((me.reversed_at.unwrap() - 0.9).abs() < 1e-9, "{:?}", me.reversed_at);
+    assert!(
+        (me.reversed_at.unwrap() - 0.9).abs() < 1e-9,
+        "{:?}",
+        me.reversed_at
+    );
     assert!((me.reversed_speed.unwrap() - 5.0).abs() < 1e-12);
 }
 
@@ -107,7 +111,13 @@ fn reversed_but_still_rolling_succeeds_only_at_t_max_and_not_at_rest() {
         obs(t, 50.0 - 1.0 * t, 0.0, yaw, 1.0, 0.0)
     });
     assert!(
-        matches!(o, Outcome::Failure { cause: FailureCause::NoTermination, .. }),
+        matches!(
+            o,
+            Outcome::Failure {
+                cause: FailureCause::NoTermination,
+                ..
+            }
+        ),
         "{o:?}"
     );
 
@@ -116,7 +126,13 @@ fn reversed_but_still_rolling_succeeds_only_at_t_max_and_not_at_rest() {
     let mut m = monitor(vec![]);
     let o = run_until_done(&mut m, |t| obs(t, 50.0, 0.0, PI + (t - 9.5), 3.0, 1.0));
     assert!(
-        matches!(o, Outcome::Failure { cause: FailureCause::NoTermination, .. }),
+        matches!(
+            o,
+            Outcome::Failure {
+                cause: FailureCause::NoTermination,
+                ..
+            }
+        ),
         "{o:?}"
     );
 
@@ -124,7 +140,13 @@ fn reversed_but_still_rolling_succeeds_only_at_t_max_and_not_at_rest() {
     let mut m = monitor(vec![]);
     let o = run_until_done(&mut m, |t| obs(t, 50.0, 1.0 * t, PI, 1.0, 0.0));
     assert!(
-        matches!(o, Outcome::Failure { cause: FailureCause::BoundaryViolation, .. }),
+        matches!(
+            o,
+            Outcome::Failure {
+                cause: FailureCause::BoundaryViolation,
+                ..
+            }
+        ),
         "{o:?}"
     );
 

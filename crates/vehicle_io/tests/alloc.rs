@@ -4,8 +4,8 @@
 //! allocates once per sent sample, inside the library (docs/vehicle_io.md). The counting
 //! allocator counts this thread only, so the recorder threads of other tests do not count.
 
-use dynamics::TargetModel;
 use alloc_count::{allocations, CountingAlloc};
+use dynamics::TargetModel;
 use vehicle_io::config::ControllerIoSettings;
 use vehicle_io::control::{ControlLoop, CycleInput};
 use vehicle_io::msg::StateEstimate;
@@ -13,7 +13,6 @@ use vehicle_io::ports::{newest, publish, ControllerPorts, ServiceNames, VehicleP
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;
-
 
 #[test]
 fn the_control_cycle_and_its_ipc_allocate_nothing() {

@@ -96,6 +96,13 @@ class Plant:
         """``[X, Y, yaw, vx, vy, r]``, shape (6,)."""
     def target_state(self) -> _F64:
         """``[vx, vy, yaw, r, p, phi, X, Y]`` (the paper's order), shape (8,)."""
+    def body(self, which: str) -> Dict[str, Any]:
+        """Full state of ``which`` ("bullet" or "target"): ``steer``, ``torque``, ``brake``
+        (actual actuator values), ``omega`` (wheel spin FL FR RL RR, rad/s), ``fz`` (wheel
+        loads, N), ``roll``, ``pitch`` (rad), ``acc_body`` (c.g. acceleration, body frame)."""
+    def set_drive(self, which: str, torque: float) -> None:
+        """Drive-torque command T_r (N m, motor side) of ``which`` ("bullet" or "target");
+        actuator limits and lag apply. ValueError for another name or a non-finite torque."""
     def contact(self) -> Optional[ContactDict]:
         """The bullet-target contact of the last step, or None."""
     def take_contact_average(self) -> Optional[ContactDict]:

@@ -270,6 +270,46 @@ def _replay_parser(sub) -> None:
     p.set_defaults(func=_cmd_replay)
 
 
+def _validate_parser(sub) -> None:
+    p = sub.add_parser(
+        "validate-plant",
+        help="check the plant against CommonRoad's multi-body model and impulse-momentum theory",
+        description=(
+            "Run the plant validation suite (docs/plant.md): step steer, sine steer, steer ramp "
+            "and straight braking against CommonRoad's multi-body model MB, and two-car impacts "
+            "against impulse-momentum theory, each with its tolerance. Prints the table; exits 1 "
+            "if a check fails. Needs scipy and commonroad-vehicle-models "
+            "(pip install 'picopit[test]')."
+        ),
+    )
+    p.add_argument("--json", metavar="PATH", help="also write the checks as JSON")
+    p.set_defaults(func=_cmd_validate)
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    import json
+
+    try:
+        import scipy  # noqa: F401
+        import vehiclemodels  # noqa: F401
+    except ImportError as e:
+        print(
+            f"picopit validate-plant: {e.name} is not installed; it comes with the test extras "
+            "(pip install 'picopit[test]')",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
+    from .validation import all_checks, format_table
+
+    checks = all_checks("full_size")
+    print(format_table(checks))
+    failed = [c for c in checks if not c.passed]
+    if args.json:
+        Path(args.json).write_text(json.dumps([c.as_dict() for c in checks], indent=1))
+    print(f"{len(checks) - len(failed)} of {len(checks)} checks pass")
+    return 1 if failed else 0
+
+
 def _cmd_replay(args: argparse.Namespace) -> int:
     from .replay import replay
 
@@ -350,6 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
     _bench_parser(sub)
     _replay_parser(sub)
     _trials_parser(sub)
+    _validate_parser(sub)
     return parser
 
 

@@ -33,11 +33,6 @@ V_BRAKE = 0.5  # brake-sign regularisation speed (m/s)
 STABLE_DOWN_TO = 1.0
 
 
-def _cornering_stiffness(tyre: Mapping[str, Any], fz: float) -> float:
-    x = fz / (tyre["pky2"] * tyre["fz0"])
-    return tyre["pky1"] * tyre["fz0"] * 2.0 * x / (1.0 + x * x)
-
-
 @dataclass(frozen=True)
 class FourDof:
     """Constants of the 4-DOF model of one vehicle (the ``[target]`` table of a parameter set)."""
@@ -56,9 +51,6 @@ class FourDof:
     fz_front: float
     fz_rear: float
     pcy1: float
-    pdy1: float
-    pdy2: float
-    fz0: float
     k_front: float  # axle cornering stiffness (N/rad), mu-independent
     k_rear: float
     dt: float
@@ -73,8 +65,9 @@ class FourDof:
         w = p["mass"] * GRAVITY
         fzf, fzr = w * p["lr"] / L, w * p["lf"] / L
         tyre = p["tyre"]
-        kf = 2.0 * _cornering_stiffness(tyre, 0.5 * fzf)
-        kr = 2.0 * _cornering_stiffness(tyre, 0.5 * fzr)
+        # CommonRoad's tyre: cornering stiffness p_Ky1 F_z, peak μ F_z (tyre::AxleCurve).
+        kf = tyre["pky1"] * fzf
+        kr = tyre["pky1"] * fzr
         m_eff = p["mass"] - ms_h * ms_h / ixx
         n = math.ceil(dt * (kf + kr) / (m_eff * STABLE_DOWN_TO * 2.5))
         return cls(
@@ -83,16 +76,14 @@ class FourDof:
             roll_c=p["roll_damping_front"] + p["roll_damping_rear"],
             h_contact=p["bumper_height"] - p["h_roll_axis"],
             inv_rw=1.0 / p["wheel_radius"], bias=p["brake_bias_front"],
-            fz_front=fzf, fz_rear=fzr, pcy1=tyre["pcy1"], pdy1=tyre["pdy1"], pdy2=tyre["pdy2"],
-            fz0=tyre["fz0"], k_front=kf, k_rear=kr, dt=dt, substeps=max(1, n),
+            fz_front=fzf, fz_rear=fzr, pcy1=tyre["pcy1"], k_front=kf, k_rear=kr, dt=dt,
+            substeps=max(1, n),
         )
 
     # ------------------------------------------------------------------ axle curves
     def _curve(self, fz_axle: float, mu: torch.Tensor, k: float):
         """(B, C, D) of the control axle curve for per-sample road adhesion ``mu``."""
-        dfz = (0.5 * fz_axle - self.fz0) / self.fz0
-        mu_y = (mu / self.pdy1) * (self.pdy1 + self.pdy2 * dfz)
-        d = mu_y * fz_axle
+        d = mu * fz_axle
         c = self.pcy1
         return k / (c * d), c, d
 
