@@ -2,7 +2,7 @@
 
 use crate::{corners_out, finite, param_err, vec_arg, vec_out};
 use dynamics::params::ParamSet;
-use dynamics::plant::{ContactReport, Plant as CorePlant, PlantConfig, VehicleInit, Which};
+use dynamics::plant::{ContactReport, Gear, Plant as CorePlant, PlantConfig, VehicleInit, Which};
 use numpy::{PyArray1, PyArray3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -32,10 +32,20 @@ fn vehicle_init(x: &nalgebra::SVector<f64, 6>) -> VehicleInit {
 #[pymethods]
 impl Plant {
     /// `params`: a built-in set name or a TOML path; `mu`: road adhesion; `dt`: step (s,
-    /// 1e-3 or finer); `tyre_forces=False` leaves only contact forces (diagnostics).
+    /// 1e-3 or finer); `tyre_forces=False` leaves only contact forces (diagnostics);
+    /// `target_gear`: "forward" (its powertrain engaged: engine braking, a stall that holds
+    /// the driven axle) or "neutral" (it rolls freely).
     #[new]
-    #[pyo3(signature = (params = "full_size", mu = 0.9, dt = 1.0e-3, *, tyre_forces = true))]
-    fn new(py: Python<'_>, params: &str, mu: f64, dt: f64, tyre_forces: bool) -> PyResult<Self> {
+    #[pyo3(signature = (params = "full_size", mu = 0.9, dt = 1.0e-3, *, tyre_forces = true, target_gear = "forward"))]
+    fn new(
+        py: Python<'_>,
+        params: &str,
+        mu: f64,
+        dt: f64,
+        tyre_forces: bool,
+        target_gear: &str,
+    ) -> PyResult<Self> {
+        let target_gear = gear_arg(target_gear)?;
         let name = params.to_owned();
         let inner = py
             .detach(move || {
@@ -46,6 +56,7 @@ impl Plant {
                         dt,
                         mu,
                         tyre_forces,
+                        target_gear,
                     },
                 )
             })
@@ -66,9 +77,10 @@ impl Plant {
     }
 
     /// Driver commands, held until changed: bullet front steer (rad) and rear drive torque
-    /// T_r (N m, negative brakes through the drivetrain); target front steer (rad) and
-    /// brake torque (N m, >= 0); bullet service-brake torque (N m, >= 0). The plant applies
-    /// the actuator limits, rate limits and lags.
+    /// T_r (N m, negative brakes through the drivetrain); target front steer (rad) and the
+    /// target driver's longitudinal torque at the wheels `T_b` (N m: >= 0 service brakes,
+    /// < 0 the throttle, drive torque -T_b at its driven axle); bullet service-brake torque
+    /// (N m, >= 0). The plant applies the actuator limits, rate limits and lags.
     #[pyo3(signature = (bullet_steer, bullet_torque, target_steer = 0.0, target_brake = 0.0, bullet_brake = 0.0))]
     fn set_commands(
         &mut self,
@@ -81,7 +93,7 @@ impl Plant {
         let bs = finite(bullet_steer, "bullet_steer")?;
         let bt = finite(bullet_torque, "bullet_torque")?;
         let ts = finite(target_steer, "target_steer")?;
-        let tb = non_negative(target_brake, "target_brake")?;
+        let tb = finite(target_brake, "target_brake")?;
         let bb = non_negative(bullet_brake, "bullet_brake")?;
         self.inner.set_bullet_command(bs, bt);
         self.inner.set_target_command(ts, tb);
@@ -154,8 +166,8 @@ impl Plant {
     /// The full state of one vehicle (`which`: "bullet" or "target"): `steer` (actual
     /// road-wheel steer, rad), `torque` (actual drive torque T_r, N m), `brake` (actual
     /// service-brake torque, N m), `omega` (wheel spin FL FR RL RR, rad/s), `fz` (wheel
-    /// loads, N), `roll` / `pitch` (rad) and `acc_body` (c.g. acceleration in the body
-    /// frame, m/s²) of the last step.
+    /// loads, N), `roll` / `pitch` (rad), `acc_body` (c.g. acceleration in the body frame,
+    /// m/s²) of the last step, and `stalled` (the engine of a vehicle in gear has stalled).
     fn body<'py>(&self, py: Python<'py>, which: &str) -> PyResult<Bound<'py, PyDict>> {
         let b = self.inner.body(which_arg(which)?);
         let d = PyDict::new(py);
@@ -167,6 +179,7 @@ impl Plant {
         d.set_item("roll", b.phi)?;
         d.set_item("pitch", b.theta)?;
         d.set_item("acc_body", PyArray1::from_slice(py, b.acc_body.as_slice()))?;
+        d.set_item("stalled", b.stalled)?;
         Ok(d)
     }
 
@@ -233,6 +246,17 @@ fn contact_dict<'py>(py: Python<'py>, c: &ContactReport) -> PyResult<Bound<'py, 
     )?;
     d.set_item("depth", c.depth)?;
     Ok(d)
+}
+
+/// A target gear by name ("forward" or "neutral").
+pub(crate) fn gear_arg(gear: &str) -> PyResult<Gear> {
+    match gear {
+        "forward" => Ok(Gear::Forward),
+        "neutral" => Ok(Gear::Neutral),
+        other => Err(PyValueError::new_err(format!(
+            "target_gear = {other:?}: must be \"forward\" or \"neutral\""
+        ))),
+    }
 }
 
 fn which_arg(which: &str) -> PyResult<Which> {

@@ -93,7 +93,7 @@ fn pos_err(a: &TargetState, b: &TargetState) -> f64 {
 }
 
 /// A gentle single lane change of the target alone: full-sine steer of `amplitude` rad over
-/// 2.5 s at `speed` m/s, speed held by a drive-torque loop in the plant, 5 s in all.
+/// 2.5 s at `speed` m/s, speed held by a throttle loop in the plant (in gear), 5 s in all.
 pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Agreement {
     let mut plant = plant_on(params, mu);
     plant.reset(
@@ -110,10 +110,12 @@ pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Ag
     let per_sample = (DT / plant.dt()).round() as usize;
     let mut samples = Vec::new();
     let period = 2.5;
+    let drive_gain = params.target.drive_efficiency * params.target.gear_ratio;
     for _ in 0..=100 {
         let body = plant.body(Which::Target);
-        // The model is fed the plant's actual (lagged, rate-limited) steer angle.
-        let u = TargetInput::new(body.steer, 0.0);
+        // The model is fed the plant's actual (lagged, rate-limited) steer angle, and its
+        // drive torque at the axle as the throttle (T_b < 0).
+        let u = TargetInput::new(body.steer, -drive_gain * body.torque);
         samples.push(Sample {
             x: plant.target_state(),
             u,
@@ -132,9 +134,9 @@ pub fn lane_change(params: &ParamSet, mu: f64, speed: f64, amplitude: f64) -> Ag
             plant.step();
         }
     }
-    // Use the steer at the middle of each interval (the plant's steer moves within it).
+    // Use the inputs at the middle of each interval (the plant's actuators move within it).
     for k in 0..samples.len() - 1 {
-        samples[k].u[0] = 0.5 * (samples[k].u[0] + samples[k + 1].u[0]);
+        samples[k].u = 0.5 * (samples[k].u + samples[k + 1].u);
     }
     let mut model = FourDofTarget::new(&params.target, mu, DT);
     agreement(&mut model, &samples)

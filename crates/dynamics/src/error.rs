@@ -20,6 +20,9 @@ pub enum ParamError {
         value: f64,
         reason: &'static str,
     },
+    /// A table a setting needs is absent (e.g. `target.powertrain` for a target in gear).
+    #[error("{table}: missing, {reason}")]
+    Missing { table: String, reason: &'static str },
     /// The file could not be read.
     #[error("cannot read {path}: {message}")]
     Io { path: String, message: String },

@@ -127,6 +127,32 @@ pub struct VehicleParams {
     pub drag_area: f64,
     /// Tyres (all four alike).
     pub tyre: TyreParams,
+    /// The engine and the engaged forward gear of a driver-controlled car (the target); a
+    /// by-wire vehicle whose controller commands its axle torque directly (the bullet) has
+    /// none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub powertrain: Option<PowertrainParams>,
+}
+
+/// The target's powertrain: an engine coupled to the driven (rear) axle through the engaged
+/// forward gear, overall ratio [`VehicleParams::gear_ratio`] (engine speed
+/// `ω_e = i_g · ω_axle`, the axle speed the mean of the two driven wheels).
+///
+/// * Running, throttle closed: the engine drags the axle with `i_g T_drag` (fuel cut-off
+///   engine braking: friction and pumping). The driver's throttle `T_r` adds `η_d i_g T_r`.
+/// * When the axle drags the engine below its stall speed (rolling forwards too slowly in
+///   gear, or turned backwards by a spin) it stalls and stays stalled: the stalled engine
+///   holds the axle with a Coulomb torque of up to `i_g T_stall` (its compression and
+///   friction), which the tyres then have to overcome; beyond their grip the wheels slide.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PowertrainParams {
+    /// T_drag: the closed-throttle drag torque at the engine (N m).
+    pub engine_drag_torque: f64,
+    /// Engine speed below which the engine stalls (rad/s); 0 for a drive that never stalls.
+    pub stall_speed: f64,
+    /// T_stall: the holding torque of the stalled engine at the engine (N m).
+    pub stall_torque: f64,
 }
 
 /// The compliant contact law between two bodies ([`crate::contact::ContactLaw`]): a linear
@@ -376,6 +402,9 @@ impl VehicleParams {
                 "must exceed m_s g h_sprung",
             );
         }
+        if let Some(pt) = &self.powertrain {
+            pt.validate(&format!("{prefix}.powertrain"))?;
+        }
         self.tyre.validate(&format!("{prefix}.tyre"))
     }
 
@@ -401,11 +430,35 @@ impl VehicleParams {
         self.drive_efficiency * self.gear_ratio / self.wheel_radius
     }
 
+    /// The wheel torque at the driven axle (N m) that holds a steady speed `v` straight
+    /// ahead on a level road: closed-throttle engine braking through the engaged gear (with a
+    /// powertrain), rolling resistance and aerodynamic drag. As a target input it is the
+    /// throttle `T_b = −cruise_wheel_torque(v)`.
+    #[must_use]
+    pub fn cruise_wheel_torque(&self, v: f64) -> f64 {
+        let engine = self
+            .powertrain
+            .as_ref()
+            .map_or(0.0, |pt| self.gear_ratio * pt.engine_drag_torque);
+        let resist = self.rolling_resistance * self.mass * GRAVITY
+            + 0.5 * crate::plant::AIR_DENSITY * self.drag_area * v * v;
+        engine + self.wheel_radius * resist
+    }
+
     /// Roll arm: sprung c.g. above the roll axis (m).
     #[inline]
     #[must_use]
     pub fn roll_arm(&self) -> f64 {
         self.h_sprung - self.h_roll_axis
+    }
+}
+
+impl PowertrainParams {
+    pub fn validate(&self, prefix: &str) -> Result<(), ParamError> {
+        rules!(prefix, self, {
+            engine_drag_torque: NonNegative, stall_speed: NonNegative, stall_torque: NonNegative,
+        });
+        Ok(())
     }
 }
 

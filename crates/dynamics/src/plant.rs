@@ -39,6 +39,19 @@ use nalgebra::SVector;
 /// Air density at 20 °C, sea level (kg/m³).
 pub const AIR_DENSITY: f64 = 1.204;
 
+/// What the target's gearbox has engaged.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Gear {
+    /// The forward gear of its powertrain ([`crate::params::PowertrainParams`]): engine
+    /// braking, and a stall that holds the driven axle.
+    #[default]
+    Forward,
+    /// Neutral: the wheels roll freely (rolling resistance and drag only), as a car coasting
+    /// with the clutch down.
+    Neutral,
+}
+
 /// Plant settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlantConfig {
@@ -49,6 +62,8 @@ pub struct PlantConfig {
     /// Tyre and aerodynamic forces on (normal use) or off (diagnostics: with them off only
     /// contact acts, and the conservation laws can be checked).
     pub tyre_forces: bool,
+    /// The target's gear (the bullet is driven by wire and has none).
+    pub target_gear: Gear,
 }
 
 impl Default for PlantConfig {
@@ -57,6 +72,7 @@ impl Default for PlantConfig {
             dt: 1e-3,
             mu: 0.9,
             tyre_forces: true,
+            target_gear: Gear::Forward,
         }
     }
 }
@@ -166,6 +182,31 @@ struct Chassis {
     cg_to_front: f64,
     tyre: TyreParams,
     mu_scale: f64,
+    /// The engaged powertrain, per driven (rear) wheel; `None` for a by-wire vehicle or a
+    /// target in neutral.
+    driveline: Option<Driveline>,
+}
+
+/// A powertrain in gear, reduced to one driven wheel (each rear wheel carries half the axle
+/// torque).
+#[derive(Debug, Clone, Copy)]
+struct Driveline {
+    /// Closed-throttle engine braking per driven wheel, `½ i_g T_drag` (N m).
+    drag: f64,
+    /// Holding torque of the stalled engine per driven wheel, `½ i_g T_stall` (N m).
+    hold: f64,
+    /// Axle speed at the engine's stall speed, `ω_stall / i_g` (rad/s).
+    stall_axle_speed: f64,
+}
+
+impl Driveline {
+    fn new(p: &VehicleParams) -> Option<Self> {
+        p.powertrain.as_ref().map(|pt| Self {
+            drag: 0.5 * p.gear_ratio * pt.engine_drag_torque,
+            hold: 0.5 * p.gear_ratio * pt.stall_torque,
+            stall_axle_speed: pt.stall_speed / p.gear_ratio,
+        })
+    }
 }
 
 impl Chassis {
@@ -191,7 +232,7 @@ impl Chassis {
         Vec2::new(self.h_bumper * b.q, self.h_bumper_roll * b.p)
     }
 
-    fn new(p: &VehicleParams, mu: f64, dt: f64) -> Self {
+    fn new(p: &VehicleParams, mu: f64, dt: f64, driveline: Option<Driveline>) -> Self {
         let l = p.wheelbase();
         let (fz_f, fz_r) = p.static_axle_loads();
         let mus = p.mass - p.sprung_mass;
@@ -251,6 +292,7 @@ impl Chassis {
             cg_to_front: p.cg_to_front,
             tyre: p.tyre.clone(),
             mu_scale: p.tyre.mu_scale(mu),
+            driveline,
         }
     }
 }
@@ -286,6 +328,8 @@ pub struct VehicleBody {
     pub fz: [f64; 4],
     /// c.g. acceleration of the last step in the body frame (m/s²).
     pub acc_body: Vec2,
+    /// The engine has stalled (a vehicle in gear; it stays stalled until reset).
+    pub stalled: bool,
 }
 
 impl VehicleBody {
@@ -364,11 +408,18 @@ impl Plant {
         params.validate()?;
         config.validate()?;
         let law = ContactLaw::from_params(&params.contact);
+        let target_driveline = match config.target_gear {
+            Gear::Neutral => None,
+            Gear::Forward => Some(Driveline::new(&params.target).ok_or(ParamError::Missing {
+                table: "target.powertrain".to_owned(),
+                reason: "a target in gear needs its powertrain (or run it in neutral)",
+            })?),
+        };
         Ok(Self {
             config,
             chassis: [
-                Chassis::new(&params.bullet, config.mu, config.dt),
-                Chassis::new(&params.target, config.mu, config.dt),
+                Chassis::new(&params.bullet, config.mu, config.dt, None),
+                Chassis::new(&params.target, config.mu, config.dt, target_driveline),
             ],
             bodies: [VehicleBody::default(); 2],
             law,
@@ -457,11 +508,17 @@ impl Plant {
         b.cmd_brake = brake;
     }
 
-    /// Target driver commands: steer δ (rad) and total brake torque T_b ≥ 0 (N m).
+    /// Target driver commands as the target models take them, `u_T = [δ, T_b]`: steer δ
+    /// (rad) and the driver's longitudinal torque at the wheels (N m): `T_b ≥ 0` the total
+    /// service-brake torque, `T_b < 0` the throttle, a drive torque `−T_b` at the driven
+    /// axle (motor side `T_r = −T_b / (η_d i_g)`).
     pub fn set_target_command(&mut self, delta: f64, t_b: f64) {
+        let gain = self.chassis[Which::Target as usize].drive_gain;
+        let t_b = finite_or_zero(t_b);
         let b = &mut self.bodies[Which::Target as usize];
         b.cmd_steer = finite_or_zero(delta);
-        b.cmd_brake = finite_or_zero(t_b);
+        b.cmd_brake = t_b.max(0.0);
+        b.cmd_torque = (-t_b).max(0.0) / gain;
     }
 
     /// Drive-torque command T_r of either vehicle (N m, motor side; the target's driver is
@@ -896,13 +953,32 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
     } else {
         v_wheel
     };
-    let drive_wheel = 0.5 * c.drive_gain * b.torque;
+    // The powertrain on the driven wheels: the throttle's drive torque and closed-throttle
+    // engine braking while the engine runs; once the axle has dragged it below its stall
+    // speed, the stalled engine's hold, a Coulomb torque like a brake's.
+    let (drive_wheel, hold_wheel) = match &c.driveline {
+        Some(d) => {
+            if !b.stalled && 0.5 * (b.omega[2] + b.omega[3]) < d.stall_axle_speed {
+                b.stalled = true;
+            }
+            if b.stalled {
+                (0.0, d.hold)
+            } else {
+                (0.5 * c.drive_gain * b.torque - d.drag, 0.0)
+            }
+        }
+        None => (0.5 * c.drive_gain * b.torque, 0.0),
+    };
     for w in 0..4 {
-        let drive = if w >= 2 { drive_wheel } else { 0.0 };
+        let (drive, hold) = if w >= 2 {
+            (drive_wheel, hold_wheel)
+        } else {
+            (0.0, 0.0)
+        };
         let i_eff = c.iw + dt * c.rw * c.rw * kx_over_v[w];
         let ground = c.rw * kx_over_v[w] * (v_wheel_new[w].x - v_wheel[w].x);
         let omega_free = b.omega[w] + dt * (drive - c.rw * fx_wheel[w] + ground) / i_eff;
-        let coulomb = c.brake_share[w] * b.brake + c.rolling_resistance * fz[w] * c.rw;
+        let coulomb = c.brake_share[w] * b.brake + c.rolling_resistance * fz[w] * c.rw + hold;
         let cap = dt * coulomb / i_eff;
         b.omega[w] = if omega_free.abs() <= cap {
             0.0

@@ -2,12 +2,19 @@
 //! kinematics, the driver's steer and brake, Magic Formula axle curves and the contact
 //! force. It is the first [`TargetModel`] and the physics prior of the PINN.
 //!
-//! State `x_T = [vx, vy, ψ, r, p, φ, X, Y]`, input `u_T = [δ, T_b]` (front steer, total
-//! brake torque at the wheels), contact `f_c = [F_n, F_t]` (the target receives `+f_c`):
+//! State `x_T = [vx, vy, ψ, r, p, φ, X, Y]`, input `u_T = [δ, T_b]` (front steer, and the
+//! driver's longitudinal torque at the wheels: `T_b ≥ 0` the total service-brake torque,
+//! `T_b < 0` the throttle's drive torque `−T_b` at the driven rear axle), contact
+//! `f_c = [F_n, F_t]` (the target receives `+f_c`), and the powertrain in gear
+//! ([`crate::params::PowertrainParams`], absent for a vehicle without one):
 //!
 //! ```text
-//! F_x,f = −β T_b/R_w · s(vx),  F_x,r = −(1−β) T_b/R_w · s(vx),  s(v) = v/sqrt(v² + v_b²)   (v_b = 0.5 m/s)
-//! ΣF_x = F_x,f cosδ − F_y,f sinδ + F_x,r + F_cx
+//! B = max(T_b, 0)/R_w,  D = max(−T_b, 0)/R_w,  s(v) = v/sqrt(v² + v_b²)   (v_b = 0.5 m/s)
+//! w(v) = 1/(1 + exp(−(v − v_stall)/v_w))   (running engine; v_stall = ω_stall R_w/i_g, v_w = 0.25 m/s)
+//! F_x,f = −β B s(vx)
+//! F_x,r = −(1−β) B s(vx) + w(vx) (D − i_g T_drag/R_w · s(vx)) − (1 − w(vx)) i_g T_stall/R_w · s(vx)
+//! F_res = −f_r m g s(vx) − ½ ρ C_d A vx |vx|   (rolling resistance and drag)
+//! ΣF_x = F_x,f cosδ − F_y,f sinδ + F_x,r + F_res + F_cx
 //! ΣF_y = F_x,f sinδ + F_y,f cosδ + F_y,r + F_cy
 //! ΣM_z = l_f (F_x,f sinδ + F_y,f cosδ) − l_r F_y,r + M_c
 //! m (v̇x − vy r)                  = ΣF_x
@@ -36,6 +43,30 @@ use nalgebra::SMatrix;
 
 /// Speed (m/s) of the brake-force regularisation `vx / sqrt(vx² + V_BRAKE²)`.
 pub const V_BRAKE: f64 = 0.5;
+
+/// Width (m/s) of the smooth switch between a running and a stalled engine around the
+/// stall speed (the plant switches at once and stays stalled).
+pub const V_STALL_BLEND: f64 = 0.25;
+
+/// The powertrain as rear-axle forces (see the module docs).
+#[derive(Debug, Clone, Copy)]
+struct Driveline {
+    /// `i_g T_drag / R_w` (N).
+    drag: f64,
+    /// `i_g T_stall / R_w` (N).
+    hold: f64,
+    /// Road speed at the engine's stall speed, `ω_stall R_w / i_g` (m/s).
+    v_stall: f64,
+}
+
+impl Driveline {
+    /// `(w, dw/dvx)`: the share of a running engine at speed `vx`.
+    #[inline]
+    fn running(&self, vx: f64) -> (f64, f64) {
+        let w = 1.0 / (1.0 + (-(vx - self.v_stall) / V_STALL_BLEND).exp());
+        (w, w * (1.0 - w) / V_STALL_BLEND)
+    }
+}
 
 /// Number of target states.
 const NX: usize = 8;
@@ -66,6 +97,11 @@ pub struct FourDofTarget {
     inv_rw: f64,
     /// Front brake share β.
     bias: f64,
+    /// The powertrain in gear, or `None` (the throttle then drives the axle directly).
+    driveline: Option<Driveline>,
+    /// Rolling resistance `f_r m g` (N) and the drag factor `½ ρ C_d A` (kg/m).
+    rolling: f64,
+    drag: f64,
     axles: Axles,
     dt: f64,
     substeps: usize,
@@ -98,6 +134,13 @@ impl FourDofTarget {
             inv_det: 1.0 / (p.mass * ixx - ms_h * ms_h),
             inv_rw: 1.0 / p.wheel_radius,
             bias: p.brake_bias_front,
+            driveline: p.powertrain.as_ref().map(|pt| Driveline {
+                drag: p.gear_ratio * pt.engine_drag_torque / p.wheel_radius,
+                hold: p.gear_ratio * pt.stall_torque / p.wheel_radius,
+                v_stall: pt.stall_speed * p.wheel_radius / p.gear_ratio,
+            }),
+            rolling: p.rolling_resistance * p.mass * GRAVITY,
+            drag: 0.5 * crate::plant::AIR_DENSITY * p.drag_area,
             axles,
             dt,
             substeps,
@@ -139,28 +182,77 @@ impl FourDofTarget {
         (vx * inv, V_BRAKE * V_BRAKE * inv / q)
     }
 
+    /// The longitudinal wheel forces `(F_x,f, F_x,r)` at speed `vx` for the driver's torque
+    /// `T_b` (module docs), with their partial derivatives by `vx` and by `T_b`:
+    /// `[F_x,f, F_x,r, ∂F_x,f/∂vx, ∂F_x,r/∂vx, ∂F_x,f/∂T_b, ∂F_x,r/∂T_b]` (at `T_b = 0` the
+    /// brake side's derivative).
+    #[inline]
+    fn longitudinal(&self, vx: f64, tb: f64) -> [f64; 6] {
+        let (s, ds) = Self::brake_factor(vx);
+        let beta = self.bias;
+        let brake = tb.max(0.0) * self.inv_rw;
+        let drive = (-tb).max(0.0) * self.inv_rw;
+        let mut out = [
+            -beta * brake * s,
+            -(1.0 - beta) * brake * s,
+            -beta * brake * ds,
+            -(1.0 - beta) * brake * ds,
+            0.0,
+            0.0,
+        ];
+        if tb >= 0.0 {
+            out[4] = -beta * self.inv_rw * s;
+            out[5] = -(1.0 - beta) * self.inv_rw * s;
+        }
+        match &self.driveline {
+            None => {
+                out[1] += drive;
+                if tb < 0.0 {
+                    out[5] = -self.inv_rw;
+                }
+            }
+            Some(d) => {
+                let (w, dw) = d.running(vx);
+                out[1] += w * (drive - d.drag * s) - (1.0 - w) * d.hold * s;
+                out[3] += dw * (drive - d.drag * s) - w * d.drag * ds + dw * d.hold * s
+                    - (1.0 - w) * d.hold * ds;
+                if tb < 0.0 {
+                    out[5] = -w * self.inv_rw;
+                }
+            }
+        }
+        out
+    }
+
+    /// Rolling resistance and aerodynamic drag along x and their derivative by `vx`.
+    #[inline]
+    fn resistance(&self, vx: f64) -> (f64, f64) {
+        let (s, ds) = Self::brake_factor(vx);
+        (
+            -self.rolling * s - self.drag * vx * vx.abs(),
+            -self.rolling * ds - 2.0 * self.drag * vx.abs(),
+        )
+    }
+
     /// The continuous-time dynamics `ẋ = f(x, u, f_c)`.
     #[must_use]
     pub fn derivative(&self, x: &TargetState, u: &TargetInput, c: &ContactInput) -> TargetState {
-        self.eval(x, &Held::new(u[0], c, 1.0), u[1] * self.inv_rw)
+        self.eval(x, &Held::new(u[0], c, 1.0), u[1])
     }
 
-    /// `f(x)` with the steer and contact held in `held` and `fb_max = T_b / R_w`.
+    /// `f(x)` with the steer and contact held in `held` and the driver's torque `tb`.
     #[inline]
-    fn eval(&self, x: &TargetState, held: &Held, fb_max: f64) -> TargetState {
+    fn eval(&self, x: &TargetState, held: &Held, tb: f64) -> TargetState {
         let (vx, vy, psi, r) = (x[idx::VX], x[idx::VY], x[idx::PSI], x[idx::R]);
         let (sd, cd) = (held.sd, held.cd);
         let (sp, cp) = psi.sin_cos();
-        let (t, _) = Self::brake_factor(vx);
-        let fb = -fb_max * t;
-        let fxf = self.bias * fb;
-        let fxr = (1.0 - self.bias) * fb;
+        let [fxf, fxr, ..] = self.longitudinal(vx, tb);
         let fyf = front_lateral(&self.axles.front, self.lf, vx, vy, r, sd, cd);
         let fyr = rear_lateral(&self.axles.rear, self.lr, vx, vy, r);
         let (fc, mc) = held.contact.force(sp, cp);
         let ffx = fxf * cd - fyf * sd;
         let ffy = fxf * sd + fyf * cd;
-        let sfx = ffx + fxr + fc.x;
+        let sfx = ffx + fxr + self.resistance(vx).0 + fc.x;
         let sfy = ffy + fyr + fc.y;
         let smz = self.lf * ffy - self.lr * fyr + mc;
         self.rates(x, sp, cp, [sfx, sfy, smz, fc.y])
@@ -198,7 +290,7 @@ impl FourDofTarget {
         &self,
         x: &TargetState,
         held: &Held,
-        fb_max: f64,
+        tb: f64,
         j: &mut SMatrix<f64, NX, NJ>,
     ) -> TargetState {
         use idx::{P, PHI, PSI, R, VX, VY};
@@ -207,15 +299,11 @@ impl FourDofTarget {
         const FN: usize = NX + 2;
         let (vx, vy, psi, r) = (x[VX], x[VY], x[PSI], x[R]);
         let (sd, cd) = (held.sd, held.cd);
-        let (lf, lr, beta) = (self.lf, self.lr, self.bias);
+        let (lf, lr) = (self.lf, self.lr);
         let (sp, cp) = psi.sin_cos();
 
-        // Brake forces F_x = −share · (T_b/R_w) · s(vx).
-        let (t, dt_dvx) = Self::brake_factor(vx);
-        let fb = -fb_max * t;
-        let dfb_dvx = -fb_max * dt_dvx;
-        let dfb_dtb = -self.inv_rw * t;
-        let (fxf, fxr) = (beta * fb, (1.0 - beta) * fb);
+        // Longitudinal wheel forces (brakes, throttle, powertrain).
+        let [fxf, fxr, dfxf_dvx, dfxr_dvx, dfxf_dtb, dfxr_dtb] = self.longitudinal(vx, tb);
         // Tyre lateral forces and the contact.
         let ff = front_lateral_d(&self.axles.front, lf, vx, vy, r, sd, cd);
         let fr = rear_lateral_d(&self.axles.rear, lr, vx, vy, r);
@@ -226,21 +314,22 @@ impl FourDofTarget {
         let ffy = fxf * sd + ff.fy * cd;
         let mut gfx = [0.0; NJ];
         let mut gfy = [0.0; NJ];
-        gfx[VX] = beta * dfb_dvx * cd - ff.d_vx * sd;
+        gfx[VX] = dfxf_dvx * cd - ff.d_vx * sd;
         gfx[VY] = -ff.d_vy * sd;
         gfx[R] = -ff.d_r * sd;
         gfx[DELTA] = -ffy - ff.d_delta * sd;
-        gfx[TB] = beta * dfb_dtb * cd;
-        gfy[VX] = beta * dfb_dvx * sd + ff.d_vx * cd;
+        gfx[TB] = dfxf_dtb * cd;
+        gfy[VX] = dfxf_dvx * sd + ff.d_vx * cd;
         gfy[VY] = ff.d_vy * cd;
         gfy[R] = ff.d_r * cd;
         gfy[DELTA] = ffx + ff.d_delta * cd;
-        gfy[TB] = beta * dfb_dtb * sd;
+        gfy[TB] = dfxf_dtb * sd;
 
         // Gradients of ΣF_x, ΣF_y, ΣM_z and the roll moment M_φ.
+        let (fres, dfres) = self.resistance(vx);
         let mut gx = gfx;
-        gx[VX] += (1.0 - beta) * dfb_dvx;
-        gx[TB] += (1.0 - beta) * dfb_dtb;
+        gx[VX] += dfxr_dvx + dfres;
+        gx[TB] += dfxr_dtb;
         gx[PSI] = ct.df_dpsi.x;
         let mut gy = gfy;
         gy[VX] += fr.d_vx;
@@ -263,7 +352,7 @@ impl FourDofTarget {
             gr[FN + k] = ct.df_dfc[(1, k)] * self.h_contact;
         }
 
-        let sfx = ffx + fxr + ct.f.x;
+        let sfx = ffx + fxr + fres + ct.f.x;
         let sfy = ffy + fr.fy + ct.f.y;
         let smz = lf * ffy - lr * fr.fy + ct.m;
         let (ixx, ms_h, m) = (
@@ -313,8 +402,7 @@ impl TargetModel for FourDofTarget {
     /// Classic RK4 over `dt` (in `substeps` sub-steps) with `u` and `c` held.
     fn step(&mut self, x: &TargetState, u: &TargetInput, c: &ContactInput) -> TargetState {
         let held = Held::new(u[0], c, 1.0);
-        let fb_max = u[1] * self.inv_rw;
-        rk4_substeps(x, self.dt, self.substeps, |xs| self.eval(xs, &held, fb_max))
+        rk4_substeps(x, self.dt, self.substeps, |xs| self.eval(xs, &held, u[1]))
     }
 
     /// The step with the exact Jacobians of the discrete map; returns bit for bit the state
@@ -327,11 +415,10 @@ impl TargetModel for FourDofTarget {
         jac: &mut TargetJacobians,
     ) -> TargetState {
         let held = Held::new(u[0], c, 1.0);
-        let fb_max = u[1] * self.inv_rw;
         let mut j = SMatrix::<f64, NX, NJ>::zeros();
         // The columns X, Y of ∂f/∂x are zero.
         let xn = rk4_jac_substeps(x, self.dt, self.substeps, 0..idx::X, &mut j, |xs, js| {
-            self.eval_jac(xs, &held, fb_max, js)
+            self.eval_jac(xs, &held, u[1], js)
         });
         split_columns(&j, &mut jac.a, &mut jac.b, &mut jac.f);
         xn

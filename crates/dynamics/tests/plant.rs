@@ -1,7 +1,7 @@
 //! Physics tests of the high-fidelity plant.
 
 use dynamics::params::ParamSet;
-use dynamics::plant::{Plant, PlantConfig, VehicleInit, Which};
+use dynamics::plant::{Gear, Plant, PlantConfig, VehicleInit, Which};
 use dynamics::GRAVITY;
 
 fn full() -> ParamSet {
@@ -214,8 +214,12 @@ fn at_rest_stays_at_rest() {
 
 #[test]
 fn coasting_decelerates_by_rolling_resistance_and_drag() {
+    // In neutral: the wheels roll freely.
     let set = full();
-    let mut p = plant(PlantConfig::default());
+    let mut p = plant(PlantConfig {
+        target_gear: Gear::Neutral,
+        ..PlantConfig::default()
+    });
     let v0 = 20.0;
     p.reset(
         &VehicleInit {
@@ -536,6 +540,136 @@ fn a_braked_vehicle_at_rest_stays_at_rest() {
             body.omega.iter().all(|w| *w == 0.0),
             "wheels {:?}",
             body.omega
+        );
+    }
+}
+
+/// The target straight ahead at `v0`, driver off the controls, after `seconds`: its speed.
+fn coast(gear: Gear, v0: f64, seconds: f64) -> (f64, bool) {
+    let mut p = plant(PlantConfig {
+        target_gear: gear,
+        ..PlantConfig::default()
+    });
+    p.reset(
+        &VehicleInit {
+            x: -100.0,
+            ..Default::default()
+        },
+        &VehicleInit {
+            vx: v0,
+            ..Default::default()
+        },
+    );
+    p.advance(seconds);
+    (p.target_state()[0], p.body(Which::Target).stalled)
+}
+
+#[test]
+fn closed_throttle_engine_braking_lies_in_the_published_range() {
+    // Fuel cut-off motoring mep of a petrol engine is 2–3 bar (friction and pumping;
+    // Heywood 1988, ch. 13): for the 1.99 L engine 32–48 N m, through the engaged gear
+    // i_g / (R_w m_eff) of deceleration. In gear the target slows by that much more than in
+    // neutral, and it equals the file's T_drag within the rounding of the wheel dynamics.
+    let veh = full().target;
+    let pt = veh.powertrain.clone().unwrap();
+    // The mass the axle torque accelerates includes the four wheels' spin inertia.
+    let m_eff = veh.mass + 4.0 * veh.wheel_inertia / (veh.wheel_radius * veh.wheel_radius);
+    let per_nm = veh.gear_ratio / (veh.wheel_radius * m_eff);
+    let (band_lo, band_hi) = (32.0 * per_nm, 48.0 * per_nm);
+    let seconds = 3.0;
+    let (v_gear, stalled) = coast(Gear::Forward, 20.0, seconds);
+    let (v_neutral, _) = coast(Gear::Neutral, 20.0, seconds);
+    assert!(!stalled, "the engine runs at 20 m/s");
+    let extra = (v_neutral - v_gear) / seconds;
+    assert!(
+        (band_lo..=band_hi).contains(&extra),
+        "engine braking {extra:.3} m/s² outside [{band_lo:.3}, {band_hi:.3}]"
+    );
+    let expect = pt.engine_drag_torque * per_nm;
+    assert!(
+        (extra - expect).abs() < 0.05 * expect,
+        "{extra:.4} vs {expect:.4} m/s²"
+    );
+}
+
+#[test]
+fn rolling_below_the_stall_speed_stalls_the_engine_and_holds_the_car() {
+    // 3 m/s in the engaged gear turns the engine at 3/R_w·i_g ≈ 35 rad/s, below its stall
+    // speed: it stalls, and the held axle stops the car where a car in neutral rolls on.
+    let (v_gear, stalled) = coast(Gear::Forward, 3.0, 3.0);
+    assert!(stalled);
+    assert!(v_gear.abs() < 1e-3, "still rolling at {v_gear}");
+    let (v_neutral, stalled) = coast(Gear::Neutral, 3.0, 3.0);
+    assert!(!stalled && v_neutral > 2.0, "neutral: {v_neutral}");
+}
+
+/// A rear-quarter push at `speed` + `dv` for `push` s, then the bullet steers away and
+/// brakes; returns (time and speed when the target first reached a reversed heading, time it
+/// came to rest, its speed at `probe` s, stalled at the end).
+fn spin(
+    gear: Gear,
+    speed: f64,
+    dv: f64,
+    push: f64,
+    probe: f64,
+) -> (f64, f64, Option<f64>, f64, bool) {
+    let mut p = plant(PlantConfig {
+        target_gear: gear,
+        ..PlantConfig::default()
+    });
+    pit_start(&mut p, speed, dv);
+    let (mut reversed, mut rest, mut probed) = (None, None, f64::NAN);
+    while p.time() < 15.0 {
+        if p.time() < push {
+            p.set_bullet_command(0.08, 400.0);
+        } else {
+            p.set_bullet_command(-0.1, 0.0);
+            p.set_brake(Which::Bullet, 3000.0);
+        }
+        p.step();
+        let t = p.target_state();
+        let v = t[0].hypot(t[1]);
+        if reversed.is_none() && t[2].abs() > 2.6 {
+            reversed = Some((p.time(), v));
+        }
+        if rest.is_none() && reversed.is_some() && v < 0.05 {
+            rest = Some(p.time());
+        }
+        if (p.time() - probe).abs() < 0.5e-3 {
+            probed = v;
+        }
+    }
+    let (t_rev, v_rev) = reversed.expect("the push reverses the target");
+    (t_rev, v_rev, rest, probed, p.body(Which::Target).stalled)
+}
+
+#[test]
+fn a_target_spun_round_in_gear_stalls_and_comes_to_rest_within_the_bound() {
+    // Bound: once reversed, the target rolls backwards on a stalled engine, which holds its
+    // driven axle with i_g T_stall; with rolling resistance that alone decelerates it at
+    //   a_min = i_g T_stall / (R_w m) + f_r g   (≈ 1.72 m/s² for full_size),
+    // and the tyres scrubbing sideways in the spin only add to it. So it is at rest within
+    // v_rev / a_min of reversing (7 s at 12 m/s). In neutral nothing holds it: it still
+    // rolls at that time.
+    let veh = full().target;
+    let pt = veh.powertrain.clone().unwrap();
+    let a_min = veh.gear_ratio * pt.stall_torque / (veh.wheel_radius * veh.mass)
+        + veh.rolling_resistance * GRAVITY;
+    for (speed, dv, push) in [(15.0, 3.0, 0.8), (17.0, 3.0, 1.0), (20.0, 3.0, 1.0)] {
+        let (t_rev, v_rev, rest, _, stalled) = spin(Gear::Forward, speed, dv, push, 0.0);
+        let bound = v_rev / a_min;
+        let rest = rest.expect("in gear the target comes to rest");
+        assert!(stalled, "{speed} m/s: the engine stalls");
+        assert!(
+            rest - t_rev <= bound,
+            "{speed} m/s: at rest {:.2} s after reversing at {v_rev:.1} m/s, bound {bound:.2} s",
+            rest - t_rev
+        );
+        let (_, _, _, rolling, stalled) = spin(Gear::Neutral, speed, dv, push, t_rev + bound);
+        assert!(!stalled);
+        assert!(
+            rolling > 0.5,
+            "{speed} m/s: neutral rolls on ({rolling:.2} m/s)"
         );
     }
 }

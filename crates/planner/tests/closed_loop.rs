@@ -69,9 +69,12 @@ fn run(side: f64, upper: bool) -> Run {
     let brake = 0.6 * params.target.brake_torque_max;
     for step in 0..240 {
         let time = step as f64 * dt;
+        // The target's driver holds 15 m/s with the throttle until the contact, lets go,
+        // and brakes from half a second after it.
         let target_input = match first_contact {
             Some(t) if time >= t + 0.5 => TargetInput::new(0.0, brake),
-            _ => TargetInput::zeros(),
+            Some(_) => TargetInput::zeros(),
+            None => TargetInput::new(0.0, -params.target.cruise_wheel_torque(15.0)),
         };
         plant.set_target_command(target_input[0], target_input[1]);
         let out = ctl

@@ -22,6 +22,7 @@ use crate::scenario::{ParamSetName, Scenario, ScenarioError};
 use crate::vehicle::{bullet_array, SimVehicle};
 use dynamics::geometry::Vec2;
 use dynamics::params::ParamSet;
+use dynamics::plant::Gear;
 use dynamics::target4dof::FourDofTarget;
 use dynamics::{ContactInput, TargetInput, TargetModel};
 use mpc::{MpcStatus, TickClock};
@@ -200,6 +201,9 @@ pub struct EpisodeConfig {
     pub clock_tick: f64,
     /// Keep the trajectory (one sample per control step) in the result.
     pub record: bool,
+    /// The target's gear: `forward` (its powertrain engaged, the default) or `neutral` (it
+    /// rolls freely once its driver lets go: for comparison).
+    pub target_gear: Gear,
 }
 
 impl Default for EpisodeConfig {
@@ -215,6 +219,7 @@ impl Default for EpisodeConfig {
             clock: ClockKind::Wall,
             clock_tick: 1.0e-5,
             record: false,
+            target_gear: Gear::Forward,
         }
     }
 }
@@ -701,6 +706,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
     let param_count = ctl.target_param_count();
 
     let mut vehicle = SimVehicle::new(sc, config.uncertainty, dt, rng)?;
+    vehicle.set_target_gear(config.target_gear)?;
     let n_steps = (sc.t_max / dt).ceil() as u64 + 1;
 
     let mut plan_times = Vec::new();

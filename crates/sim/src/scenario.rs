@@ -722,7 +722,7 @@ impl Scenario {
     /// The target driver of this scenario for parameter set `params`.
     #[must_use]
     pub fn target_driver(&self, params: &ParamSet) -> TargetDriver {
-        TargetDriver::new(self.driver, &params.target, self.target.s)
+        TargetDriver::new(self.driver, &params.target, self.target.s, self.target.vx)
     }
 }
 
@@ -791,6 +791,15 @@ pub enum DriverHypothesis {
 /// The target driver's command `(δ, T_b)` as a function of time, the first contact and the
 /// target's state. Allocation-free; keeps the last Frenet station as the projection hint.
 ///
+/// `T_b` is the driver's longitudinal torque at the wheels (the target models' input):
+/// positive brakes, negative is the throttle at the driven axle. Every driver keeps its
+/// initial speed with the throttle until the first contact (an out-of-control car is not
+/// slowing down on its own) and lets go of it then, or when it starts braking:
+/// `−T_b = T_ff + k m R_w (v₀ − v_x)`, clamped to the drive's range, with `T_ff` the wheel
+/// torque that balances closed-throttle engine braking, rolling resistance and drag at `v₀`
+/// and `k = 1 /s`. Without the throttle a car in gear is slowed by its engine (and stalls
+/// once spun round); see `dynamics::params::PowertrainParams`.
+///
 /// Lane keeping: `δ = L κ(s) + g (−k_d (d − offset) − k_ψ wrap(ψ − ψ_road) − k_r (r − v κ))`
 /// with `L` the wheelbase, `k_d = 0.05 rad/m`, `k_ψ = 0.6`, `k_r = 0.1 s`, scaled by the
 /// driver's gain `g`, clamped to `±0.15 rad` (a driver's corrections, not a spin recovery).
@@ -800,20 +809,41 @@ pub struct TargetDriver {
     wheelbase: f64,
     brake_max: f64,
     s_hint: f64,
+    /// The speed the throttle holds (m/s).
+    v_ref: f64,
+    /// Wheel torque that balances the resistances at `v_ref` (N m).
+    hold_torque: f64,
+    /// `k m R_w` of the speed loop (N m per m/s) and the drive's largest wheel torque (N m).
+    hold_gain: f64,
+    drive_max: f64,
 }
+
+/// Speed-loop bandwidth of the target driver's throttle (1/s).
+pub const THROTTLE_GAIN: f64 = 1.0;
 
 /// Lane-keeping gains (see [`TargetDriver`]; the law is [`dynamics::driver::LaneKeeper`]).
 pub use dynamics::driver::{LANE_KEEP_KD, LANE_KEEP_KPSI, LANE_KEEP_KR, LANE_KEEP_MAX_STEER};
 
 impl TargetDriver {
+    /// The driver of `def` for vehicle `target`, starting at station `s0` with speed `v0`
+    /// (which its throttle holds until the first contact).
     #[must_use]
-    pub fn new(def: DriverDef, target: &VehicleParams, s0: f64) -> Self {
+    pub fn new(def: DriverDef, target: &VehicleParams, s0: f64, v0: f64) -> Self {
         Self {
             def,
             wheelbase: target.wheelbase(),
             brake_max: target.brake_torque_max,
             s_hint: s0,
+            v_ref: v0,
+            hold_torque: target.cruise_wheel_torque(v0),
+            hold_gain: THROTTLE_GAIN * target.mass * target.wheel_radius,
+            drive_max: target.drive_efficiency * target.gear_ratio * target.drive_torque_max,
         }
+    }
+
+    /// The throttle's wheel torque (≥ 0) that holds the initial speed at speed `vx`.
+    fn throttle(&self, vx: f64) -> f64 {
+        (self.hold_torque + self.hold_gain * (self.v_ref - vx)).clamp(0.0, self.drive_max)
     }
 
     #[must_use]
@@ -878,9 +908,15 @@ impl TargetDriver {
         road: &Road,
     ) -> (f64, f64) {
         let since_contact = first_contact.map(|tc| t - tc);
+        // Throttle until the first contact (negative T_b), unless braking.
+        let drive = if first_contact.is_none() {
+            -self.throttle(x[0])
+        } else {
+            0.0
+        };
         match self.def {
-            DriverDef::None { steer } => (steer, 0.0),
-            DriverDef::LaneKeep { offset, gain } => (self.lane_keep(offset, gain, x, road), 0.0),
+            DriverDef::None { steer } => (steer, drive),
+            DriverDef::LaneKeep { offset, gain } => (self.lane_keep(offset, gain, x, road), drive),
             DriverDef::Brake {
                 offset,
                 gain,
@@ -892,7 +928,7 @@ impl TargetDriver {
                     Trigger::Start => t >= delay,
                     Trigger::Contact => since_contact.is_some_and(|dt| dt >= delay),
                 };
-                let brake = if on { fraction * self.brake_max } else { 0.0 };
+                let brake = if on { fraction * self.brake_max } else { drive };
                 let steer = if since_contact.is_some() {
                     0.0
                 } else {
@@ -909,7 +945,7 @@ impl TargetDriver {
             } => match since_contact {
                 Some(dt) if dt >= delay => ((-steer_gain * x[3]).clamp(-max_steer, max_steer), 0.0),
                 Some(_) => (0.0, 0.0),
-                None => (self.lane_keep(offset, gain, x, road), 0.0),
+                None => (self.lane_keep(offset, gain, x, road), drive),
             },
         }
     }

@@ -16,7 +16,7 @@ use crate::episode::{EpisodeError, Uncertainty};
 use crate::outcome::{Metrics, Monitor, Status};
 use crate::scenario::{Scenario, TargetDriver};
 use dynamics::params::ParamSet;
-use dynamics::plant::{Plant, PlantConfig};
+use dynamics::plant::{Gear, Plant, PlantConfig, VehicleInit};
 use dynamics::road::{Obstacle, Road};
 use dynamics::{ContactInput, TargetState};
 use rand::{Rng, RngCore};
@@ -137,6 +137,8 @@ pub struct SimVehicle {
     applied: [f64; 2],
     contact: Option<ContactInput>,
     status: Status,
+    /// The scenario's initial states (bullet, target).
+    initial: (VehicleInit, VehicleInit),
 }
 
 impl SimVehicle {
@@ -173,6 +175,7 @@ impl SimVehicle {
         plant.set_obstacles(obstacles.clone());
         let (bi, ti) = sc.initial_states(&road);
         plant.reset(&bi, &ti);
+        let initial = (bi, ti);
         let driver = sc.target_driver(&params);
         let monitor = Monitor::for_scenario(sc)?;
         let plant_dt = plant.dt();
@@ -202,7 +205,32 @@ impl SimVehicle {
             applied: [0.0; 2],
             contact: None,
             status: Status::Running,
+            initial,
         })
+    }
+
+    /// Put the target in `gear` (the plant starts again from the scenario's initial states;
+    /// call before the first period). The default is [`Gear::Forward`].
+    ///
+    /// # Errors
+    /// [`EpisodeError::Plant`] when the target has no powertrain for a forward gear.
+    pub fn set_target_gear(&mut self, gear: Gear) -> Result<(), EpisodeError> {
+        if self.plant.config().target_gear == gear {
+            return Ok(());
+        }
+        let mut plant = Plant::new(
+            &self.params,
+            PlantConfig {
+                target_gear: gear,
+                ..*self.plant.config()
+            },
+        )
+        .map_err(|e| EpisodeError::Plant(e.to_string()))?;
+        plant.set_obstacles(self.obstacles.clone());
+        let (bi, ti) = self.initial;
+        plant.reset(&bi, &ti);
+        self.plant = plant;
+        Ok(())
     }
 
     /// What the sensors report now; the target driver decides its input for this period

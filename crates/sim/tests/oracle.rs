@@ -117,26 +117,22 @@ fn the_shove_grid_agrees_with_the_search() {
     );
 }
 
-/// A driver whose command never changes (fixed steer, no reaction to the contact) is the
-/// same whether the chooser knows the law or holds the command; a lane keeper, whose
-/// steer follows the spinning target, is not.
+/// Holding the driver's command at the shove is not knowing its law: a driver who brakes
+/// hard once hit stops the spun target where a held command (the throttle it had before the
+/// contact) keeps driving it.
 #[test]
-fn holding_the_command_changes_nothing_for_a_driver_without_feedback() {
-    let mut v = common::straight();
-    v["driver"] = serde_json::json!({"kind": "none", "steer": 0.0});
+fn holding_the_command_is_not_knowing_the_drivers_law() {
     let settings = shoves(&[1.5, 2.0, 2.5, 3.0]);
+    let mut v = common::straight();
+    v["driver"] = serde_json::json!({"kind": "brake", "offset": -1.75, "gain": 1.0,
+        "trigger": "contact", "delay": 0.0, "fraction": 1.0});
     let sc = scenario(&v);
-    let truth = shove_grid(&sc, &settings, DriverView::True).unwrap();
-    let held = shove_grid(&sc, &settings, DriverView::Held).unwrap();
-    assert_eq!(truth, held);
-
-    let sc = scenario(&common::straight());
     let truth = shove_grid(&sc, &settings, DriverView::True).unwrap();
     let held = shove_grid(&sc, &settings, DriverView::Held).unwrap();
     assert_eq!(truth.times, held.times);
     assert_ne!(
         truth.success, held.success,
-        "the lane keeper's steer matters after a shove"
+        "the driver's braking matters after a shove"
     );
 }
 

@@ -214,6 +214,70 @@ fn a_lane_keeping_target_stays_in_its_lane_on_the_curve() {
     assert!(worst < 0.5, "lane error {worst}");
 }
 
+/// Every kind of driver holds the target's initial speed with the throttle until the first
+/// contact (in gear, against engine braking, rolling resistance and drag; on the curve and
+/// on the straight road), within ±0.5 m/s over 5 s, and lets go of it after the contact.
+#[test]
+fn before_the_contact_every_driver_holds_its_speed() {
+    use dynamics::plant::{Plant, PlantConfig, VehicleInit};
+    for (road_kind, base) in [
+        ("curved", common::curved()),
+        ("straight", common::straight()),
+    ] {
+        for driver in [
+            json!({"kind": "none", "steer": 0.0}),
+            json!({"kind": "lane_keep", "offset": -1.75, "gain": 1.0}),
+            json!({"kind": "brake", "offset": -1.75, "gain": 1.0, "trigger": "contact", "delay": 0.3, "fraction": 0.4}),
+            json!({"kind": "counter_steer", "offset": -1.75, "gain": 1.0, "delay": 0.3, "steer_gain": 0.25, "max_steer": 0.25}),
+        ] {
+            let mut v = base.clone();
+            v["driver"] = driver.clone();
+            let sc = Scenario::from_json_line(&v.to_string(), 1).unwrap();
+            let params = sc.params.load().unwrap();
+            let road = sc.build_road().unwrap();
+            let mut plant = Plant::new(
+                &params,
+                PlantConfig {
+                    mu: sc.mu,
+                    ..PlantConfig::default()
+                },
+            )
+            .unwrap();
+            let (_, ti) = sc.initial_states(&road);
+            plant.reset(
+                &VehicleInit {
+                    x: -1e5,
+                    ..VehicleInit::default()
+                },
+                &ti,
+            );
+            let mut d = sc.target_driver(&params);
+            let mut worst: f64 = 0.0;
+            for k in 0..100 {
+                let x = plant.target_state();
+                let (steer, tb) = d.command(k as f64 * 0.05, None, &x, &road);
+                assert!(
+                    tb < 0.0,
+                    "{road_kind} {driver}: on the throttle before the contact"
+                );
+                plant.set_target_command(steer, tb);
+                plant.advance(0.05);
+                worst = worst.max((plant.target_state()[0] - ti.vx).abs());
+            }
+            assert!(
+                worst < 0.5,
+                "{road_kind} {driver}: speed off by {worst:.2} m/s"
+            );
+            let x = plant.target_state();
+            let (_, tb) = d.command(5.0, Some(4.9), &x, &road);
+            assert!(
+                tb >= 0.0,
+                "{road_kind} {driver}: off the throttle after the contact"
+            );
+        }
+    }
+}
+
 /// A reaction hypothesis keeps what the chooser saw before the contact (the lane keeper's
 /// line and gain) and replaces only the reaction: before the contact every hypothesis
 /// steers as the driver does; after it, braking brakes at 35 % from 0.5 s, letting go
@@ -234,7 +298,8 @@ fn a_driver_hypothesis_replaces_only_the_reaction_to_the_contact() {
         let mut d = driver;
         d.command(1.0, None, &x, &road)
     };
-    assert!(before.0.abs() > 1e-4 && before.1 == 0.0, "{before:?}");
+    // Before the contact: steering for the lane, the throttle holding the speed (T_b < 0).
+    assert!(before.0.abs() > 1e-4 && before.1 < 0.0, "{before:?}");
     for h in [H::LaneKeep, H::Release, H::Brake, H::CounterSteer] {
         let mut d = driver.hypothesis(h, 0.0);
         if h != H::Release {
@@ -247,7 +312,7 @@ fn a_driver_hypothesis_replaces_only_the_reaction_to_the_contact() {
         let early = d.command(1.2, Some(1.0), &x, &road);
         let late = d.command(1.6, Some(1.0), &x, &road);
         match h {
-            H::LaneKeep => assert_eq!(late, before),
+            H::LaneKeep => assert_eq!(late, (before.0, 0.0), "off the throttle"),
             H::Release => assert_eq!((early, late), ((0.0, 0.0), (0.0, 0.0))),
             H::Brake => {
                 assert_eq!(early, (0.0, 0.0));

@@ -55,11 +55,19 @@ class Plant:
     """The high-fidelity two-vehicle simulator (the truth), fixed step ``dt``."""
 
     def __init__(
-        self, params: str = "full_size", mu: float = 0.9, dt: float = 1e-3, *, tyre_forces: bool = True
+        self,
+        params: str = "full_size",
+        mu: float = 0.9,
+        dt: float = 1e-3,
+        *,
+        tyre_forces: bool = True,
+        target_gear: str = "forward",
     ) -> None:
         """``params``: built-in set name or TOML path; ``mu``: road adhesion in (0, 1.5];
         ``dt``: step in (0, 1e-3] s; ``tyre_forces=False`` leaves only contact forces
-        (diagnostics). Bad values raise ParamError naming ``plant.mu`` / ``plant.dt``."""
+        (diagnostics); ``target_gear``: "forward" (the target's powertrain engaged: engine
+        braking, a stall that holds the driven axle) or "neutral" (it rolls freely). Bad
+        values raise ParamError naming ``plant.mu`` / ``plant.dt``, ValueError for a gear."""
     def reset(self, bullet: _ArrayLike, target: _ArrayLike) -> None:
         """Place both vehicles, each ``[X, Y, yaw, vx, vy, r]`` (c.g. position, body-frame
         velocities); time restarts at 0."""
@@ -72,8 +80,9 @@ class Plant:
         bullet_brake: float = 0.0,
     ) -> None:
         """Driver commands held until changed: bullet front steer (rad), rear drive torque
-        T_r (N m, negative brakes through the drivetrain); target front steer (rad), brake
-        torque (N m, >= 0); bullet service brake (N m, >= 0). The plant applies actuator
+        T_r (N m, negative brakes through the drivetrain); target front steer (rad), the
+        target driver's longitudinal torque at the wheels (N m: >= 0 service brakes, < 0 the
+        throttle, drive torque at its driven axle); bullet service brake (N m, >= 0). The plant applies actuator
         limits, rate limits and lags."""
     def set_bullet_command_blended(self, steer: float, torque: float) -> None:
         """The bullet command as the controllers plan it, ``[δ_f, T_r]``: a positive T_r
@@ -99,7 +108,8 @@ class Plant:
     def body(self, which: str) -> Dict[str, Any]:
         """Full state of ``which`` ("bullet" or "target"): ``steer``, ``torque``, ``brake``
         (actual actuator values), ``omega`` (wheel spin FL FR RL RR, rad/s), ``fz`` (wheel
-        loads, N), ``roll``, ``pitch`` (rad), ``acc_body`` (c.g. acceleration, body frame)."""
+        loads, N), ``roll``, ``pitch`` (rad), ``acc_body`` (c.g. acceleration, body frame),
+        ``stalled`` (the engine of a vehicle in gear has stalled)."""
     def set_drive(self, which: str, torque: float) -> None:
         """Drive-torque command T_r (N m, motor side) of ``which`` ("bullet" or "target");
         actuator limits and lag apply. ValueError for another name or a non-finite torque."""

@@ -4,15 +4,18 @@ Each episode places the bullet so that, driving straight, its front inner corner
 target's side at a sampled station over the rear quarter and side, at a sampled contact angle
 and speed difference, after a sampled free-motion lead-in. Through the contact the bullet
 holds a quarter turn into the target with drive torque, then steers away and brakes. The
-target's driver does one of: nothing (an uncontrolled, slightly steered car), lane keeping,
-braking after a reaction time, counter-steering against the yaw rate after a reaction time.
-Episodes run on until the target has settled or the episode time is over, so the data hold
-the free motion before the hit, the contact and the spin-out after it.
+target is a car in gear (its powertrain: engine braking, a stall that holds the driven axle
+once the spin turns it backwards). Its driver holds the initial speed with the throttle
+until the contact (as ``sim::TargetDriver``), then does one of: nothing (an uncontrolled,
+slightly steered car), lane keeping, braking after a reaction time, counter-steering
+against the yaw rate after a reaction time. Episodes run on until the target has settled or
+the episode time is over, so the data hold the free motion before the hit, the contact, the
+spin-out after it and the stalled target rolling backwards to rest.
 
 Recorded at the MPC step (0.05 s), per sample k: the target state x_k, the target driver's
-command u_k = [δ, T_b] held over [t_k, t_k + dt], the contact averaged over that interval
-(impulse / time; γ and the point of action weighted by the normal impulse, zeros when there
-was no contact), the road μ, and x_{k+1}. Episodes are split into train / val / test with the
+command u_k = [δ, T_b] held over [t_k, t_k + dt] (T_b < 0: the throttle), the contact
+averaged over that interval (impulse / time; γ and the point of action weighted by the normal
+impulse, zeros when there was no contact), the road μ, and x_{k+1}. Episodes are split into train / val / test with the
 seed. Output: ``dataset.npz`` and ``manifest.json`` (sampling configuration, counts, seed,
 command, SHA-256 content hash of the arrays).
 """
@@ -31,6 +34,9 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from . import _core, load_params_dict
+from .physics import AIR_DENSITY, GRAVITY
+
+THROTTLE_GAIN = 1.0  # 1/s, the speed loop of sim::TargetDriver (THROTTLE_GAIN)
 
 DT = 0.05
 DRIVER_MODES = ("none", "lane_keep", "brake", "counter_steer")
@@ -197,6 +203,29 @@ def initial_states(spec: EpisodeSpec, pb: Mapping[str, Any], pt: Mapping[str, An
 
 
 @dataclass
+class _Throttle:
+    """The target driver's speed-holding throttle (``sim::TargetDriver``): the wheel torque
+    ``T_ff + k m R_w (v0 − vx)``, clamped to the drive, with ``T_ff`` balancing engine
+    braking, rolling resistance and drag at ``v0``."""
+
+    v0: float
+    hold: float
+    gain: float
+    max: float
+
+    @classmethod
+    def of(cls, pt: Mapping[str, Any], v0: float) -> "_Throttle":
+        pw = pt.get("powertrain")
+        engine = pt["gear_ratio"] * pw["engine_drag_torque"] if pw else 0.0
+        resist = pt["rolling_resistance"] * pt["mass"] * GRAVITY + 0.5 * AIR_DENSITY * pt["drag_area"] * v0 * v0
+        return cls(v0, engine + pt["wheel_radius"] * resist, THROTTLE_GAIN * pt["mass"] * pt["wheel_radius"],
+                   pt["drive_efficiency"] * pt["gear_ratio"] * pt["drive_torque_max"])
+
+    def wheel_torque(self, vx: float) -> float:
+        return float(np.clip(self.hold + self.gain * (self.v0 - vx), 0.0, self.max))
+
+
+@dataclass
 class _Drive:
     mass: float
     gain: float  # eta i_g / R_w
@@ -222,6 +251,7 @@ def run_episode(spec: EpisodeSpec, params: str, pb: Mapping[str, Any], pt: Mappi
     drive = _Drive(pb["mass"], pb["drive_efficiency"] * pb["gear_ratio"] / pb["wheel_radius"],
                    pb["drive_torque_min"], pb["drive_torque_max"], pb["brake_torque_max"])
     vb_des = xb0[3]
+    throttle = _Throttle.of(pt, float(xt0[3]))
     push_point = np.array([-(pt["length"] - pt["cg_to_front"]) + spec.station * pt["length"],
                            spec.side * (0.5 * pt["width"] - 0.05)])
     corner_b = np.array([pb["cg_to_front"], -spec.side * 0.5 * pb["width"]])
@@ -259,7 +289,8 @@ def run_episode(spec: EpisodeSpec, params: str, pb: Mapping[str, Any], pt: Mappi
         # Target driver.
         reacted = first_contact is not None and t >= first_contact + spec.reaction_time
         g = spec.driver_gain
-        steer, brake = 0.0, 0.0
+        # Until the contact the driver holds its speed with the throttle (T_b < 0).
+        steer, brake = 0.0, (-throttle.wheel_torque(xt[0]) if first_contact is None else 0.0)
         if spec.driver == "none":
             steer = spec.drift_steer
         elif spec.driver == "lane_keep":
@@ -373,11 +404,16 @@ def generate(cfg: DatagenConfig, progress: bool = True,
             bar.close()
     arrays = {k: np.concatenate(v) for k, v in parts.items()}
     contact = arrays["fc"][:, 0] > 0
+    pw = pt.get("powertrain")
+    v_stall = pw["stall_speed"] * pt["wheel_radius"] / pt["gear_ratio"] if pw else 0.0
     counts = {
         "episodes": cfg.episodes,
         "episodes_with_contact": contact_eps,
         "samples": int(len(arrays["x"])),
         "contact_samples": int(contact.sum()),
+        "throttle_samples": int((arrays["u"][:, 1] < 0).sum()),
+        "backward_samples": int((arrays["x"][:, 0] < -0.5).sum()),
+        "below_stall_speed_samples": int((arrays["x"][:, 0] < v_stall).sum()),
         "driver_modes": modes,
     }
     for i, s in enumerate(SPLITS):

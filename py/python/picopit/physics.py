@@ -12,8 +12,11 @@ I_xx ṗ + m_s h (v̇y + vx r) = (m_s g h − K_φ) φ − C_φ p + F_cy h_c
 φ̇ = p, ψ̇ = r, Ẋ = vx cosψ − vy sinψ, Ẏ = vx sinψ + vy cosψ
 ```
 
-with the Magic Formula axle curves at the static axle loads (E = 0) and the smooth brake
-sign. The discrete map integrates them over one step with classic RK4 in the same stable
+with the Magic Formula axle curves at the static axle loads (E = 0), the smooth brake
+sign, the driver's signed longitudinal torque (``T_b ≥ 0`` brakes, ``T_b < 0`` the throttle
+at the driven axle), the powertrain in gear (closed-throttle engine braking, blended into the
+stalled engine's hold below the stall speed) and rolling resistance and drag. The discrete
+map integrates them over one step with classic RK4 in the same stable
 number of sub-steps as the Rust model, so on data produced by ``FourDofTarget`` the physics
 residual (network increment minus the integrated Newton–Euler increment) vanishes to
 rounding (``tests/test_surrogates.py`` checks it).
@@ -30,6 +33,8 @@ import torch
 GRAVITY = 9.80665
 V_LOW = 0.5  # slip-angle regularisation speed (m/s), as crates/dynamics tyre::V_LOW
 V_BRAKE = 0.5  # brake-sign regularisation speed (m/s)
+V_STALL_BLEND = 0.25  # running/stalled switch width (m/s), as target4dof::V_STALL_BLEND
+AIR_DENSITY = 1.204  # kg/m³, as plant::AIR_DENSITY
 STABLE_DOWN_TO = 1.0
 
 
@@ -51,6 +56,11 @@ class FourDof:
     fz_front: float
     fz_rear: float
     pcy1: float
+    rolling: float  # f_r m g (N)
+    drag: float  # ½ ρ C_d A (kg/m)
+    drive_drag: float  # i_g T_drag / R_w (N); 0 without a powertrain
+    drive_hold: float  # i_g T_stall / R_w (N)
+    v_stall: float  # ω_stall R_w / i_g (m/s); None-like -inf without a powertrain
     k_front: float  # axle cornering stiffness (N/rad), mu-independent
     k_rear: float
     dt: float
@@ -69,6 +79,8 @@ class FourDof:
         kf = tyre["pky1"] * fzf
         kr = tyre["pky1"] * fzr
         m_eff = p["mass"] - ms_h * ms_h / ixx
+        pt = p.get("powertrain")
+        i_g, r_w = p["gear_ratio"], p["wheel_radius"]
         n = math.ceil(dt * (kf + kr) / (m_eff * STABLE_DOWN_TO * 2.5))
         return cls(
             mass=p["mass"], iz=p["iz"], lf=p["lf"], lr=p["lr"], ms_h=ms_h, ixx=ixx,
@@ -76,8 +88,13 @@ class FourDof:
             roll_c=p["roll_damping_front"] + p["roll_damping_rear"],
             h_contact=p["bumper_height"] - p["h_roll_axis"],
             inv_rw=1.0 / p["wheel_radius"], bias=p["brake_bias_front"],
-            fz_front=fzf, fz_rear=fzr, pcy1=tyre["pcy1"], k_front=kf, k_rear=kr, dt=dt,
-            substeps=max(1, n),
+            fz_front=fzf, fz_rear=fzr, pcy1=tyre["pcy1"],
+            rolling=p["rolling_resistance"] * p["mass"] * GRAVITY,
+            drag=0.5 * AIR_DENSITY * p["drag_area"],
+            drive_drag=i_g * pt["engine_drag_torque"] / r_w if pt else 0.0,
+            drive_hold=i_g * pt["stall_torque"] / r_w if pt else 0.0,
+            v_stall=pt["stall_speed"] * r_w / i_g if pt else -math.inf,
+            k_front=kf, k_rear=kr, dt=dt, substeps=max(1, n),
         )
 
     # ------------------------------------------------------------------ axle curves
@@ -93,8 +110,16 @@ class FourDof:
         (bf, cf, df), (br, cr, dr) = curves
         sp, cp = torch.sin(psi), torch.cos(psi)
         t = vx / torch.sqrt(vx * vx + V_BRAKE * V_BRAKE)
-        fbk = -tb * self.inv_rw * t
-        fxf, fxr = self.bias * fbk, (1.0 - self.bias) * fbk
+        brake = torch.clamp(tb, min=0.0) * self.inv_rw
+        drive = torch.clamp(-tb, min=0.0) * self.inv_rw
+        fxf = -self.bias * brake * t
+        fxr = -(1.0 - self.bias) * brake * t
+        if math.isinf(self.v_stall):
+            fxr = fxr + drive
+        else:
+            w = torch.sigmoid((vx - self.v_stall) / V_STALL_BLEND)
+            fxr = fxr + w * (drive - self.drive_drag * t) - (1.0 - w) * self.drive_hold * t
+        fres = -self.rolling * t - self.drag * vx * torch.abs(vx)
         vyf = vy + self.lf * r
         vxw, vyw = cd * vx + sd * vyf, -sd * vx + cd * vyf
         af = vyw / torch.sqrt(vxw * vxw + V_LOW * V_LOW)
@@ -103,7 +128,7 @@ class FourDof:
         fyr = -dr * torch.sin(cr * torch.atan(br * ar))
         ffx = fxf * cd - fyf * sd
         ffy = fxf * sd + fyf * cd
-        sfx = ffx + fxr + fcx
+        sfx = ffx + fxr + fres + fcx
         sfy = ffy + fyr + fcy
         smz = self.lf * ffy - self.lr * fyr + mc
         mroll = self.roll_k * phi - self.roll_c * p + fcy * self.h_contact

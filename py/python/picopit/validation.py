@@ -8,7 +8,8 @@
   the recorded angle; the brake torque becomes its acceleration input ``−T_b / (m R_w)``,
   which MB turns back into the same wheel torques with the same front share). Rolling
   resistance and drag are set to zero in the plant (MB has neither), the target coasts in
-  neutral, and the road's μ is MB's tyre peak (``p_dy1``), so the tyres are the same too.
+  neutral (MB has no engine), and the road's μ is MB's tyre peak (``p_dy1``), so the tyres
+  are the same too.
 * **Impacts** against impulse–momentum theory (Brach 1983): two cars with tyres off, one
   driven into the other; the plant's normal impulse and yaw-rate changes against the
   rigid-body prediction at the restitution and impulse ratio the contact produced, that
@@ -124,7 +125,7 @@ def _plant_trace(
     brake_cmd: float,
     stop_below: float = -math.inf,
 ) -> Trace:
-    plant = _core.Plant(params_path, mu=mu)
+    plant = _core.Plant(params_path, mu=mu, target_gear="neutral")
     plant.reset([-200.0, 50.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, speed, 0.0, 0.0])
     steps = int(round(SAMPLE / plant.dt))
     rows = []

@@ -29,11 +29,14 @@ pub fn road() -> Road {
 }
 
 /// A scripted situation: target in the middle lane at 15 m/s heading along the road, the
-/// bullet placed relative to it (in the target frame), both at the given speeds.
+/// bullet placed relative to it (in the target frame), both at the given speeds. The
+/// target's driver holds its speed with the throttle, as an out-of-control car does until
+/// it is hit.
 pub struct Situation {
     pub target: TargetState,
     pub bullet: BulletState,
     pub reference: Reference,
+    pub target_input: TargetInput,
 }
 
 pub fn situation(rel_x: f64, rel_y: f64, rel_yaw: f64, v_target: f64, v_bullet: f64) -> Situation {
@@ -60,6 +63,7 @@ pub fn situation(rel_x: f64, rel_y: f64, rel_yaw: f64, v_target: f64, v_bullet: 
         target,
         bullet,
         reference,
+        target_input: TargetInput::new(0.0, -p.target.cruise_wheel_torque(v_target)),
     }
 }
 
@@ -68,7 +72,7 @@ pub fn input<'a>(s: &'a Situation, road: Option<&'a Road>) -> MpcInput<'a> {
         time: 0.0,
         target: s.target,
         bullet: s.bullet,
-        target_input: TargetInput::zeros(),
+        target_input: s.target_input,
         last_command: BulletInput::zeros(),
         road,
         obstacles: &[],
