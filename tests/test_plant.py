@@ -65,8 +65,13 @@ def test_bad_arguments_raise_value_error_naming_them():
         p.reset(BULLET0, [0.0, 0.0, 0.0, float("nan"), 0.0, 0.0])
     with pytest.raises(ValueError, match="bullet_torque"):
         p.set_commands(0.0, float("inf"))
+    # (A negative target_brake is the throttle; a non-finite one is refused.)
     with pytest.raises(ValueError, match="target_brake"):
-        p.set_commands(0.0, 0.0, 0.0, -1.0)
+        p.set_commands(0.0, 0.0, 0.0, float("nan"))
+    with pytest.raises(ValueError, match="target_gear"):
+        picopit.Plant(target_gear="reverse")
+    with pytest.raises(ValueError, match="which"):
+        p.body("both")
     with pytest.raises(ValueError, match="duration"):
         p.advance(-1.0)
     with pytest.raises(ValueError, match="duration"):

@@ -28,6 +28,8 @@ import numpy as np
 GRAVITY = 9.80665
 V_LOW = 0.5  # tyre.rs
 V_BRAKE = 0.5  # target4dof.rs
+V_STALL_BLEND = 0.25  # target4dof.rs
+AIR_DENSITY = 1.204  # plant.rs
 STABLE_DOWN_TO = 1.0  # bullet.rs
 FAR = 1.0e4  # mpc.rs: a right-hand side that makes a row inactive
 
@@ -168,6 +170,12 @@ class FourDofPort:
         m_eff = p["mass"] - self.ms_h * self.ms_h / self.ixx
         cs = self.front.cornering_stiffness() + self.rear.cornering_stiffness()
         self.substeps = stable_substeps(dt, cs, m_eff)
+        pw = p.get("powertrain")
+        k = p["gear_ratio"] / p["wheel_radius"]
+        self.driveline = None if pw is None else (
+            k * pw["engine_drag_torque"], k * pw["stall_torque"], pw["stall_speed"] / k)
+        self.rolling = p["rolling_resistance"] * p["mass"] * GRAVITY
+        self.drag = 0.5 * AIR_DENSITY * p["drag_area"]
 
     def rhs(self, x, u, fc, gamma, point):
         p = self.p
@@ -175,15 +183,23 @@ class FourDofPort:
         sd, cd = ca.sin(u[0]), ca.cos(u[0])
         sp, cp = ca.sin(psi), ca.cos(psi)
         t = vx / ca.sqrt(vx * vx + V_BRAKE * V_BRAKE)
-        fb = -(u[1] / p["wheel_radius"]) * t
+        brake = ca.fmax(u[1], 0.0) / p["wheel_radius"]
+        drive = ca.fmax(-u[1], 0.0) / p["wheel_radius"]
         beta = p["brake_bias_front"]
-        fxf, fxr = beta * fb, (1.0 - beta) * fb
+        fxf, fxr = -beta * brake * t, -(1.0 - beta) * brake * t
+        if self.driveline is None:
+            fxr = fxr + drive
+        else:
+            drag, hold, v_stall = self.driveline
+            w = 1.0 / (1.0 + ca.exp(-(vx - v_stall) / V_STALL_BLEND))
+            fxr = fxr + w * (drive - drag * t) - (1.0 - w) * hold * t
+        fres = -self.rolling * t - self.drag * vx * ca.fabs(vx)
         fyf = front_lateral(self.front, p["lf"], vx, vy, r, sd, cd)
         fyr = rear_lateral(self.rear, p["lr"], vx, vy, r)
         fcx, fcy, mc = contact_force(fc, gamma, point, psi, 1.0)
         ffx = fxf * cd - fyf * sd
         ffy = fxf * sd + fyf * cd
-        sfx = ffx + fxr + fcx
+        sfx = ffx + fxr + fres + fcx
         sfy = ffy + fyr + fcy
         smz = p["lf"] * ffy - p["lr"] * fyr + mc
         mroll = self.roll_k * phi - self.roll_c * pr + fcy * self.h_contact
