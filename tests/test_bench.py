@@ -105,6 +105,13 @@ def test_per_episode_results_agree_with_the_summary(bench_run):
         rate = 100.0 * sum(bool(r["success"]) for r in rows) / 3
         assert doc["configs"][name]["success_rate"] == pytest.approx(rate)
         assert {r["scenario"] for r in rows} == set(doc["run"]["scene_ids"])
+        # The funnel in the summary is the episodes' own.
+        f = doc["configs"][name]["funnel"]
+        assert (f["scenes"], f["success"]) == (3, sum(bool(r["success"]) for r in rows))
+        assert f["first_contact"] == sum(bool(r["contacts"]) for r in rows if not r.get("error"))
+        assert f["reversed"] == sum(
+            r["reversed_at"] not in (None, "") and r["reversed_at"] == r["reversed_at"]
+            and (r["success"] or float(r["decided_at"]) >= float(r["reversed_at"])) for r in rows)
     # The impact at the first contact (m/s, rad): a column each, empty (None / NaN / "")
     # when the episode had no contact or the extension does not report it.
     for r in table:

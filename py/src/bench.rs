@@ -105,6 +105,14 @@ fn run_episode<'py>(
     d.set_item("impact_y", m.impact_point.map(|p| p[1]))?;
     d.set_item("reversed_at", m.reversed_at)?;
     d.set_item("reversed_speed", m.reversed_speed)?;
+    d.set_item(
+        "failed_vehicle",
+        m.failed_vehicle.map(|p| match p {
+            ::sim::outcome::Party::Bullet => "bullet",
+            ::sim::outcome::Party::Target => "target",
+            ::sim::outcome::Party::Both => "both",
+        }),
+    )?;
     d.set_item("sim_time", r.sim_time)?;
     d.set_item("control_steps", r.control_steps)?;
     for (prefix, s) in [("plan", &r.plan), ("ctrl", &r.ctrl)] {

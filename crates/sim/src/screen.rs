@@ -8,15 +8,19 @@
 //! * `trivial`: the target comes to rest by itself, inside the road and without touching
 //!   anything, within `T_max` — no PIT needed.
 //! * `impossible`: the target leaves the road or hits an obstacle before the bullet could
-//!   reach the PIT pose plus `pit_lead` seconds; or it never fails but the bullet cannot
-//!   reach it early enough to finish a PIT (`pit_lead + spin_time`) by `T_max`.
+//!   reach the PIT pose and push for `pit_lead` seconds; or it never fails but the bullet
+//!   cannot reach it early enough to finish a PIT (`pit_lead + spin_time`) by `T_max`.
 //! * `keep`: otherwise.
 //!
-//! The bullet's reach is a kinematic bound: full acceleration `a = min(F_drive/m,
-//! μ g · rear static share)` from its initial speed up to `v_cap = min(v_T0 + 10 m/s,
-//! 45 m/s, √(0.8 μ g R))`, against the target's simulated station; the PIT pose puts the
-//! bullet's front bumper at the target's rear axle. The lateral move to the target's side
-//! takes `2 √(Δd / (0.3 μ g))`. The reach time is the larger of the two.
+//! The bullet's reach time is the later of two bounds against the target's simulated
+//! station; the PIT pose puts the bullet's front bumper at the target's rear axle, beside it:
+//! * kinematic: full acceleration `a = min(F_drive/m, μ g · rear static share)` from its
+//!   initial speed up to `v_cap = min(v_T0 + 10 m/s, 45 m/s, √(0.8 μ g R))`, and the lateral
+//!   move to the target's side in `2 √(Δd / (0.3 μ g))`;
+//! * the controller's own approach model (`planner::PlannerSettings`, its defaults, speeds
+//!   Froude-scaled by `√planner::length_scale`): closing a gap `d` on the target takes
+//!   `min(d / 2.5 m/s, 1.5 s + d / 8 m/s)`, the lateral move `Δd / 1 m/s` at the same time,
+//!   plus 0.3 s to settle. The controller does not approach faster than it plans to.
 
 use crate::outcome::JudgeSettings;
 use crate::scenario::{Scenario, ScenarioError};
@@ -40,7 +44,8 @@ pub struct ScreenSettings {
     pub overlap: f64,
     /// Share of μ g usable for cornering at the initial speed.
     pub curve_mu_share: f64,
-    /// Time from reaching the PIT pose until a PIT has changed the target's course (s).
+    /// Time from reaching the PIT pose until a PIT has changed the target's course (s): the
+    /// turn-in, the push (the planner's window, up to 0.8 s) and the first of the spin.
     pub pit_lead: f64,
     /// Time a PIT needs to turn the target round and stop it (s).
     pub spin_time: f64,
@@ -57,7 +62,7 @@ impl Default for ScreenSettings {
             vehicle_gap: 0.3,
             overlap: 0.5,
             curve_mu_share: 0.8,
-            pit_lead: 1.0,
+            pit_lead: 1.5,
             spin_time: 3.0,
             closing_cap: 10.0,
             top_speed: 45.0,
@@ -352,7 +357,25 @@ pub(crate) fn reach_time(
     } else {
         sc.target.d + side
     };
+    let lateral = (d_pit - sc.bullet.d).abs();
     let a_lat = 0.3 * sc.mu * GRAVITY;
-    let t_lat = 2.0 * ((d_pit - sc.bullet.d).abs() / a_lat).sqrt();
-    t_long.max(t_lat)
+    let t_lat = 2.0 * (lateral / a_lat).sqrt();
+    // The controller's approach model on the initial gap to the PIT pose.
+    let gap = (sc.target.s - offset - sc.bullet.s).max(0.0);
+    let model = approach_time(params, gap, lateral);
+    t_long.max(t_lat).max(model)
+}
+
+/// The controller's approach model (`planner::PlannerSettings::closing_time`, lateral speed
+/// and settling time, its defaults with speeds Froude-scaled to the vehicles): the time to
+/// close a longitudinal gap `gap` and a lateral offset `lateral` (m) to the PIT pose.
+pub(crate) fn approach_time(params: &ParamSet, gap: f64, lateral: f64) -> f64 {
+    let s = planner::PlannerSettings::default();
+    let froude = planner::length_scale(params).sqrt();
+    let scaled = planner::PlannerSettings {
+        approach_speed: s.approach_speed * froude,
+        approach_speed_far: s.approach_speed_far * froude,
+        ..s
+    };
+    scaled.settle_time + scaled.closing_time(gap).max(lateral / (s.lateral_speed * froude))
 }

@@ -44,15 +44,37 @@ fn a_target_leaving_the_road_before_the_bullet_arrives_is_impossible() {
     v["bullet"]["s"] = json!(20.0);
     v["bullet"]["vx"] = json!(15.0);
     v["driver"] = json!({"kind": "none", "steer": 0.05});
+    let lead = ScreenSettings::default().pit_lead;
     let r = verdict(&v);
     assert_eq!(r.verdict, Verdict::Impossible, "{r:?}");
-    assert!(r.t_fail.unwrap() < r.t_reach + 1.0);
-    // The same drift with the bullet right behind and faster: kept.
+    assert!(r.t_fail.unwrap() < r.t_reach + lead);
+    // A slower drift with the bullet right behind and faster: it leaves the road only after
+    // the bullet could have pushed for `pit_lead`: kept.
     v["bullet"]["s"] = json!(53.0);
     v["bullet"]["vx"] = json!(20.0);
-    v["driver"]["steer"] = json!(0.005);
+    v["driver"]["steer"] = json!(0.003);
     let r = verdict(&v);
     assert_eq!(r.verdict, Verdict::Keep, "{r:?}");
+    assert!(r.t_fail.unwrap() >= r.t_reach + lead, "{r:?}");
+    // Faster, it goes before: the race is lost.
+    v["driver"]["steer"] = json!(0.005);
+    let r = verdict(&v);
+    assert_eq!(r.verdict, Verdict::Impossible, "{r:?}");
+}
+
+#[test]
+fn the_reach_bound_is_the_controllers_approach_model_where_that_is_slower() {
+    // 25 m behind at the target's speed: full acceleration would close in ~3.2 s, the
+    // controller's approach model (1.5 s + gap / 8 m/s, plus 0.3 s to settle) takes longer.
+    let mut v = common::straight();
+    v["bullet"]["s"] = json!(30.0);
+    v["bullet"]["vx"] = v["target"]["vx"].clone();
+    let r = verdict(&v);
+    let sc = Scenario::from_json_line(&v.to_string(), 1).unwrap();
+    let params = sc.params.load().unwrap();
+    let gap = sc.target.s - (params.target.lr + params.bullet.cg_to_front) - sc.bullet.s;
+    let model = 0.3 + (gap / 2.5).min(1.5 + gap / 8.0);
+    assert!((r.t_reach - model).abs() < 1e-9, "{} vs {model}", r.t_reach);
 }
 
 #[test]

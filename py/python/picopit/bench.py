@@ -8,9 +8,12 @@ out over local processes or a Ray cluster, and writes the paper's tables and fig
   overall, by road (straight/curved) and adhesion band (low/mid/high), terminal heading
   error, minimum safety margin, boundary-violation and secondary-collision rates, planning
   and control times (median and p99, pooled over all steps), parameter count and the
-  failure-cause breakdown. JSON shape: ``{"configs": {"<name>": {"success_rate": ...}}}``.
+  failure-cause breakdown, and the funnel (scenes → first contact → reversed → success, with
+  the losses by stage, cause and who failed). JSON shape:
+  ``{"configs": {"<name>": {"success_rate": ..., "funnel": {...}}}}``.
 * ``episodes.parquet`` -- one row per episode (``episodes.csv`` when pyarrow is missing).
-* ``panels.png`` -- A: success by road and adhesion, B: failure composition, C: runtimes.
+* ``panels.png`` -- A: success by road and adhesion, B: failure composition, C: runtimes,
+  D: the funnel (scenes → first contact → reversed → success, ``picopit.funnel``).
 * ``contacts.png`` -- D: success by where the first contact landed along the target, E: by
   the relative speed at that contact, F: the share of its start speed a spun target kept
   when it first came round to the reversed heading, successes against failures.
@@ -36,7 +39,7 @@ from typing import Any, Dict, Iterable, Iterator, List, Mapping, Optional, Seque
 
 import numpy as np
 
-from . import _core, provenance
+from . import _core, funnel, provenance
 
 SUBSET_SIZE = 128
 CATEGORIES = ("straight_urban", "straight_highway", "curved")
@@ -320,6 +323,7 @@ def summarise(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str,
         s["contacts_mean"] = _finite(np.mean([r["contacts"] for r in ok])) if ok else None
         for c in CAUSES + (ERROR_CAUSE,):
             s[f"fail_{c}"] = _pct(sum(r.get("cause") == c for r in rs), n)
+        s["funnel"] = funnel.funnel(rs)
         out[name] = s
     return out
 
@@ -402,6 +406,11 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
     lines.append("Failure causes (first cause, % of the configuration's episodes):")
     lines.append("")
     table(CAUSE_COLUMNS)
+    lines.append("Funnel (scenes → first contact → target reversed → success) and where the "
+                 "episodes were lost, by first cause and who failed:")
+    lines.append("")
+    lines.append(funnel.markdown({name: s["funnel"] for name, s in summary.items() if "funnel" in s}))
+    lines.append("")
     if pairs:
         lines.append("Paired comparison (the same scenes and seeds; exact McNemar test on the scenes "
                      "only one of the two saved):")
@@ -416,6 +425,12 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
 
 
 def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
+    """The scalar metrics, one row per configuration (the funnel's stage counts flattened to
+    ``funnel_<stage>``; its losses are in summary.json and summary.md)."""
+    flat = {name: {**{k: v for k, v in s.items() if k != "funnel"},
+                   **{f"funnel_{st}": s["funnel"][st] for st in funnel.STAGES if "funnel" in s}}
+            for name, s in summary.items()}
+    summary = flat
     keys = sorted({k for s in summary.values() for k in s})
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
@@ -428,7 +443,7 @@ EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion",
                   "seed", "model", "param_count", "upper_layer", "success", "at_rest", "cause", "decided_at",
                   "terminal_heading_error", "min_margin", "boundary_violation", "secondary_collision",
                   "contacts", "impact_speed", "impact_angle", "impact_x", "impact_y", "reversed_at",
-                  "reversed_speed", "sim_time", "control_steps", "plan_count",
+                  "reversed_speed", "failed_vehicle", "sim_time", "control_steps", "plan_count",
                   "plan_ms_median", "plan_ms_p99", "plan_ms_max", "ctrl_count", "ctrl_ms_median",
                   "ctrl_ms_p99", "ctrl_ms_max",
                   "final_phase", "abort", "mpc_failures", "mpc_time_budget", "wall_time", "error")
@@ -460,7 +475,7 @@ def write_episodes(table: Sequence[Mapping[str, Any]], out: Path) -> Tuple[Path,
     cols = {k: [row.get(k) for row in table] for k in EPISODE_FIELDS}
     schema = pa.schema([
         (k, pa.string()) if k in ("config", "scenario", "category", "road", "adhesion", "params",
-                                  "model", "cause", "final_phase", "abort", "error")
+                                  "model", "cause", "failed_vehicle", "final_phase", "abort", "error")
         else (k, pa.bool_()) if k in ("upper_layer", "success", "at_rest", "boundary_violation", "secondary_collision")
         else (k, pa.uint64()) if k == "seed"
         else (k, pa.int64()) if k in ("index", "param_count", "contacts", "control_steps", "plan_count",
@@ -520,7 +535,7 @@ CAUSE_COLORS = {"decision_infeasible": "#8c6bb1", "no_termination": "#bdbdbd",
 def plot_panels(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     plt = _pyplot()
     names = list(summary)
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    fig, axes = plt.subplots(1, 4, figsize=(21, 4.8))
     # A: success by road and adhesion.
     ax = axes[0]
     groups = [("success_rate", "all"), ("success_straight", "straight"), ("success_curved", "curved"),
@@ -575,6 +590,8 @@ def plot_panels(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     if shown:  # every bar from the same floor, and room for the legend above the 50 ms line
         ax.set_ylim(0.5 * min(shown), 4.0 * max(max(shown), 50.0))
     ax.legend(fontsize=8, loc="upper right", ncol=3)
+    # D: the funnel.
+    funnel.plot(axes[3], {n: summary[n]["funnel"] for n in names if "funnel" in summary[n]})
     fig.tight_layout()
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
