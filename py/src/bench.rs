@@ -99,6 +99,7 @@ fn run_episode<'py>(
     d.set_item("boundary_violation", m.boundary_violation)?;
     d.set_item("secondary_collision", m.secondary_collision)?;
     d.set_item("contacts", m.contacts)?;
+    d.set_item("contact_at", m.contact_at)?;
     d.set_item("impact_speed", m.impact_speed)?;
     d.set_item("impact_angle", m.impact_angle)?;
     d.set_item("impact_x", m.impact_point.map(|p| p[0]))?;

@@ -212,6 +212,9 @@ pub struct Metrics {
     /// without contact).
     #[serde(default)]
     pub impact_speed: Option<f64>,
+    /// Time of the first bullet–target contact (s; `None` without contact).
+    #[serde(default)]
+    pub contact_at: Option<f64>,
     /// Impact angle at the first contact (rad): `|wrap(ψ_B − ψ_T)|` (`None` without
     /// contact).
     #[serde(default)]
@@ -384,6 +387,7 @@ impl Monitor {
                 at_rest: false,
                 failed_vehicle: None,
                 impact_speed: None,
+                contact_at: None,
                 impact_angle: None,
                 impact_point: None,
                 reversed_at: None,
@@ -506,6 +510,7 @@ impl Monitor {
     fn record_impact(&mut self, plant: &Plant) {
         if self.metrics.impact_speed.is_none() {
             let (b, t) = (plant.body(Which::Bullet), plant.body(Which::Target));
+            self.metrics.contact_at = Some(plant.time());
             self.metrics.impact_speed = Some((b.vel - t.vel).norm());
             self.metrics.impact_angle = Some(wrap_angle(b.yaw - t.yaw).abs());
             self.metrics.impact_point = plant

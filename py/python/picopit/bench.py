@@ -116,6 +116,8 @@ class BenchConfig:
     # "wall": real runtimes and real time budgets (the paper's table); "simulated": a tick
     # clock, so every episode is repeatable to the step whatever the machine's load.
     clock: str = "wall"
+    # The target's gear: "forward" (its powertrain engaged) or "neutral" (for comparison).
+    target_gear: str = "forward"
 
     def validate(self) -> "BenchConfig":
         known = list(_core.episode_presets())
@@ -136,6 +138,8 @@ class BenchConfig:
             raise BenchError(f"--seed = {self.seed}: must be >= 0")
         if self.clock not in ("wall", "simulated"):
             raise BenchError(f"--clock = {self.clock!r}: must be wall or simulated")
+        if self.target_gear not in ("forward", "neutral"):
+            raise BenchError(f"--target-gear = {self.target_gear!r}: must be forward or neutral")
         if not self.scenarios.is_file():
             raise BenchError(f"--scenarios: {self.scenarios}: no such file")
         if not self.models.is_dir():
@@ -151,9 +155,9 @@ class BenchConfig:
     def episode_config(self, name: str) -> str:
         """The configuration text handed to the core: a preset name, or the preset with the
         uncertainty override and the clock as JSON."""
-        if self.uncertainty is None and self.clock == "wall":
+        if self.uncertainty is None and self.clock == "wall" and self.target_gear == "forward":
             return name
-        doc: Dict[str, Any] = {"preset": name, "clock": self.clock}
+        doc: Dict[str, Any] = {"preset": name, "clock": self.clock, "target_gear": self.target_gear}
         if self.uncertainty is not None:
             doc["uncertainty"] = self.uncertainty
         return json.dumps(doc)
@@ -442,7 +446,7 @@ def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
 EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion", "params", "mu", "target_speed",
                   "seed", "model", "param_count", "upper_layer", "success", "at_rest", "cause", "decided_at",
                   "terminal_heading_error", "min_margin", "boundary_violation", "secondary_collision",
-                  "contacts", "impact_speed", "impact_angle", "impact_x", "impact_y", "reversed_at",
+                  "contacts", "contact_at", "impact_speed", "impact_angle", "impact_x", "impact_y", "reversed_at",
                   "reversed_speed", "failed_vehicle", "sim_time", "control_steps", "plan_count",
                   "plan_ms_median", "plan_ms_p99", "plan_ms_max", "ctrl_count", "ctrl_ms_median",
                   "ctrl_ms_p99", "ctrl_ms_max",
@@ -932,6 +936,7 @@ def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[
     info.update(scenarios=str(cfg.scenarios), scene_set="full" if cfg.full else f"stratified subset of {cfg.subset}",
                 scenes=len(res.scenes), limit=cfg.limit, configs=list(cfg.configs), seed=cfg.seed,
                 workers=cfg.n_workers(), ray_address=cfg.ray_address, uncertainty=cfg.uncertainty,
+                target_gear=cfg.target_gear,
                 seconds=round(res.seconds, 2), machine=machine(), notes=res.notes,
                 scene_ids=[res.meta[i]["id"] for i in res.scenes])
     header = (f"# picopit bench\n\n`{info.get('command', 'picopit bench')}` — {info.get('created', '')}, "

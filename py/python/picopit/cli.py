@@ -245,6 +245,10 @@ def _bench_parser(sub) -> None:
     p.add_argument("--clock", default="wall", metavar="wall|simulated",
                    help="wall: real runtimes and time budgets (default); simulated: a tick clock, "
                         "every episode repeatable whatever the machine's load")
+    p.add_argument("--target-gear", default="forward", metavar="forward|neutral",
+                   help="the target's gear: forward (its powertrain engaged: engine braking, a stall that "
+                        "holds the driven axle; default) or neutral (it rolls freely once let go: for "
+                        "comparison)")
     p.add_argument("--out", metavar="DIR", help="run folder (default runs/bench-<timestamp>)")
     p.add_argument("--json", metavar="PATH", help="also write the summary JSON here")
     p.add_argument("--workers", type=int, default=0, metavar="W", help="worker processes (default 0: all cores)")
@@ -647,6 +651,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
         uncertainty=bench.parse_uncertainty(args.uncertainty) if args.uncertainty else None,
         cases=not args.no_figures, figures=not args.no_figures, clock=args.clock,
+        target_gear=args.target_gear,
     ).validate()
     out = Path(args.out) if args.out else Path("runs") / ("bench-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S"))
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
