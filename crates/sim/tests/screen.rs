@@ -52,7 +52,7 @@ fn a_target_leaving_the_road_before_the_bullet_arrives_is_impossible() {
     // the bullet could have pushed for `pit_lead`: kept.
     v["bullet"]["s"] = json!(53.0);
     v["bullet"]["vx"] = json!(20.0);
-    v["driver"]["steer"] = json!(0.003);
+    v["driver"]["steer"] = json!(0.002);
     let r = verdict(&v);
     assert_eq!(r.verdict, Verdict::Keep, "{r:?}");
     assert!(r.t_fail.unwrap() >= r.t_reach + lead, "{r:?}");
