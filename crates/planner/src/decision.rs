@@ -20,6 +20,7 @@
 //! outcome, reported with its reason. The search is deterministic and allocates nothing
 //! after construction.
 
+use crate::approach::Profile;
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 use crate::settings::{length_scale, ContactPointModel, PlannerSettings, TargetDriverModel};
 use dynamics::bullet::BulletState;
@@ -378,30 +379,35 @@ impl Planner {
         Some(self.clamp_contact_x(x))
     }
 
-    /// Earliest time (s from now) the bullet can be at its contact pose on `side`: a simple
-    /// approach model (closing on the target as `PlannerSettings::closing_time`, moving across at
-    /// `lateral_speed` at the same time, plus a settling time); crossing behind the target to the other side
-    /// adds the way back and forth.
+    /// Earliest time (s from now) the bullet can be at its contact pose on `side`: the
+    /// approach along the target ([`Profile`], from the bullet's relative position and speed,
+    /// arriving at rest relative to the target), moving across at `lateral_speed` at the same
+    /// time, plus a settling time; crossing behind the target to the other side first drops
+    /// back behind its rear bumper.
     fn earliest_arrival(&self, side: Side, xt: &TargetState, xb: &BulletState) -> f64 {
         let s = &self.settings;
         let c = self.contact_pose(side);
-        let pose = Pose2::new(xt[idx::X], xt[idx::Y], xt[idx::PSI]);
-        let rel = pose.body_from_world(Vec2::new(xb[0], xb[1]));
-        let mut dx = (c.rel_pos.x - rel.x).abs();
+        let rel = crate::href::relative_position(xt, xb);
+        let rel_vel = crate::href::relative_velocity(xt, xb);
+        let dx = (c.rel_pos.x - rel.x).abs();
         let dy = (c.rel_pos.y - rel.y).abs();
         let k = self.len_scale;
         if dx.hypot(dy) < 0.3 * k || self.gap(xt, xb) < 0.1 * k {
             // At the contact pose, or touching already: a PIT under way.
             return 0.0;
         }
-        if side.sign() * rel.y < 0.0 {
+        let (a, cap) = (s.approach_accel(self.mu), s.approach_speed);
+        let along = if side.sign() * rel.y < 0.0 {
             // On the other side: drop back behind the target's rear first.
             let behind = -(self.params.target.length - self.params.target.cg_to_front)
                 - self.params.bullet.cg_to_front
                 - 0.5 * k;
-            dx = (rel.x - behind).max(0.0) + (c.rel_pos.x - behind).abs();
-        }
-        s.settle_time + s.closing_time(dx).max(dy / s.lateral_speed)
+            Profile::new(rel.x, rel_vel.x, behind.min(rel.x), a, cap).time()
+                + Profile::new(behind.min(rel.x), 0.0, c.rel_pos.x, a, cap).time()
+        } else {
+            Profile::new(rel.x, rel_vel.x, c.rel_pos.x, a, cap).time()
+        };
+        s.settle_time + along.max(dy / s.lateral_speed)
     }
 
     /// Keep `o` if it is the best feasible candidate so far (or, while none is feasible, the
@@ -1189,6 +1195,13 @@ impl Planner {
         p.contact_rel_heading = c.rel_heading;
         p.push_speed = s.push_speed;
         p.envelope_lat = c.envelope_lat;
+        p.approach = Profile::new(
+            crate::href::relative_position(&input.target, &input.bullet).x,
+            crate::href::relative_velocity(&input.target, &input.bullet).x,
+            c.rel_pos.x,
+            s.approach_accel(self.mu),
+            s.approach_speed,
+        );
         p.window = match chosen {
             Some(o) => (
                 input.time + o.k0 as f64 * s.dt,

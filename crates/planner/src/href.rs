@@ -1,5 +1,6 @@
 //! h_ref(Π, x_T, x_B, C_F, C_B) → e_ref: the MPC's reference from the decision package.
 
+use crate::approach::Profile;
 use crate::package::{DecisionPackage, Mode};
 use crate::settings::PlannerSettings;
 use dynamics::bullet::BulletState;
@@ -12,6 +13,16 @@ use mpc::{Reference, StageReference};
 #[must_use]
 pub fn relative_position(xt: &TargetState, xb: &BulletState) -> Vec2 {
     Pose2::new(xt[idx::X], xt[idx::Y], xt[idx::PSI]).body_from_world(Vec2::new(xb[0], xb[1]))
+}
+
+/// The rate of [`relative_position`]: the bullet's c.g. velocity relative to the target's
+/// body frame (which turns at the target's yaw rate), in that frame.
+#[must_use]
+pub fn relative_velocity(xt: &TargetState, xb: &BulletState) -> Vec2 {
+    let rel = relative_position(xt, xb);
+    let vb = rotate(xb[2] - xt[idx::PSI], Vec2::new(xb[3], xb[4]));
+    let r = xt[idx::R];
+    vb - Vec2::new(xt[idx::VX], xt[idx::VY]) - Vec2::new(-r * rel.y, r * rel.x)
 }
 
 /// When the reference is for: the control step's time, the MPC's step, and the target's
@@ -37,8 +48,8 @@ pub struct Timing {
 ///   start).
 ///   The target objective tracks the planned heading at the end of the MPC's horizon
 ///   (the virtual rollout's prediction), so the MPC pushes as much as the plan needs.
-/// * Chase (and abort, while the controller's patience lasts): close in to just behind the
-///   contact station, no force.
+/// * Chase (and abort, while the controller's patience lasts): close in to the stand-off
+///   line beside the contact station and wait there, no force.
 /// * Stabilise: fall back, no force, no target objective.
 pub fn fill_reference(
     pkg: &DecisionPackage,
@@ -86,21 +97,12 @@ pub fn fill_reference(
     match pkg.mode {
         Mode::Pit => {
             let (t0, t1) = pkg.window;
-            let arrive = (t0 - s.turn_in).max(time + dt);
+            let approach =
+                Approach::new(pkg, rel, stand, time, s, behind_x, ls);
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
                 *st = if tau < t0 - s.turn_in {
-                    Approach {
-                        rel,
-                        goal: stand,
-                        time,
-                        arrive,
-                        speed_cap: s.approach_speed_far,
-                        lateral_speed: s.lateral_speed,
-                        behind_x,
-                        length_scale: ls,
-                    }
-                    .stage(tau)
+                    approach.stage(tau)
                 } else if tau <= t1 {
                     let (lo, hi) = pkg.step_at(tau.max(t0)).map_or((0.0, 0.0), |p| p.corridor);
                     // The contact pose is held in the target's frame as it was when the
@@ -129,21 +131,10 @@ pub fn fill_reference(
         // An infeasible decision while chasing: keep station behind (the controller aborts
         // after its patience).
         Mode::Chase | Mode::Abort => {
-            let hold = Vec2::new(stand.x - 1.0 * ls, stand.y);
-            let arrive = time + s.closing_time(hold.x - rel.x).max(dt);
+            let approach = Approach::new(pkg, rel, stand, time, s, behind_x, ls);
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
-                *st = Approach {
-                    rel,
-                    goal: hold,
-                    time,
-                    arrive,
-                    speed_cap: s.approach_speed_far,
-                    lateral_speed: s.lateral_speed,
-                    behind_x,
-                    length_scale: ls,
-                }
-                .stage(tau);
+                *st = approach.stage(tau);
             }
             r.target_heading = pkg.terminal.heading;
             r.target_weight = 0.0;
@@ -156,37 +147,55 @@ pub fn fill_reference(
     }
 }
 
-/// The approach: from the current relative position `rel` (at `time`) to `goal` at
-/// `arrive` (linearly in x), moving across at no more than `lateral_speed`, and kept behind
-/// `behind_x` while more than a metre (full size; × `length_scale`) off the goal's line (so
-/// that a bullet changing lanes behind the target does not close in on its rear first),
-/// then held.
+/// The approach: along the target by the package's [`Profile`] (planned when the package
+/// was, arriving at rest relative to the target at the contact station: the reference is a
+/// trajectory in time, so the MPC cannot put off braking by re-planning it from wherever
+/// the bullet has got to), across from the current relative position `rel` (at `time`) to
+/// `goal` at no more than `lateral_speed`, and kept behind `behind_x`
+/// while it is more than a metre (full size; × `length_scale`) off the goal's line (so that
+/// a bullet changing lanes behind the target does not close in on its rear first), then
+/// held.
 #[derive(Debug, Clone, Copy)]
 struct Approach {
     rel: Vec2,
     goal: Vec2,
     time: f64,
-    arrive: f64,
-    speed_cap: f64,
+    along: Profile,
+    /// When `along` starts (the package's planning time).
+    along_from: f64,
     lateral_speed: f64,
     behind_x: f64,
     length_scale: f64,
 }
 
 impl Approach {
+    fn new(
+        pkg: &DecisionPackage,
+        rel: Vec2,
+        goal: Vec2,
+        time: f64,
+        s: &PlannerSettings,
+        behind_x: f64,
+        length_scale: f64,
+    ) -> Self {
+        Self {
+            rel,
+            goal,
+            time,
+            along: pkg.approach,
+            along_from: pkg.time,
+            lateral_speed: s.lateral_speed,
+            behind_x,
+            length_scale,
+        }
+    }
+
     /// The stage at time `tau`.
     fn stage(&self, tau: f64) -> StageReference {
         let (rel, goal) = (self.rel, self.goal);
-        let span = (self.arrive - self.time).max(1e-3);
-        let a = ((tau - self.time) / span).clamp(0.0, 1.0);
         let reach = self.lateral_speed * (tau - self.time).max(0.0);
         let y = rel.y + (goal.y - rel.y).clamp(-reach, reach);
-        let mut x = rel.x + (goal.x - rel.x) * a;
-        let mut v = if tau < self.arrive {
-            ((goal.x - rel.x) / span).clamp(-self.speed_cap, self.speed_cap)
-        } else {
-            0.0
-        };
+        let (mut x, mut v) = self.along.at(tau - self.along_from);
         if (goal.y - y).abs() > self.length_scale {
             let cap = self.behind_x.max(rel.x);
             if x > cap {

@@ -4,7 +4,7 @@
 //! * [`decision`]: [`Planner`], the virtual PIT rollout optimised over the interaction
 //!   descriptor u_T^vir = [F_n, F_t], the contact window and the contact side.
 //! * [`package`]: [`DecisionPackage`] (Π), its [`Mode`] and the [`Infeasible`] reasons.
-//! * [`href`]: h_ref, the MPC's reference from Π.
+//! * [`href`]: h_ref, the MPC's reference from Π; [`approach`]: the bullet's approach.
 //! * [`phase`]: [`PhaseMachine`]: chasing → PIT → stabilisation → done, abort.
 //! * [`controller`]: [`PitController`]: planner + MPC + phase machine; the upper layer
 //!   switchable off for the paper's ablation.
@@ -12,6 +12,7 @@
 //!
 //! `docs/planner.md` gives the formulation and the measurements.
 
+pub mod approach;
 pub mod controller;
 pub mod decision;
 pub mod href;

@@ -1,5 +1,6 @@
 //! The decision package Π that the upper layer hands to the coupled MPC: plain data.
 
+use crate::approach::Profile;
 use dynamics::geometry::Vec2;
 use dynamics::road::Obstacle;
 use dynamics::TargetState;
@@ -91,6 +92,10 @@ pub struct DecisionPackage {
     pub contact_rel_heading: f64,
     pub push_speed: f64,
     pub envelope_lat: f64,
+    /// The bullet's approach along the target, planned at `time` from its relative position
+    /// and speed then to the contact station (the body x of `contact_rel_pos`), at rest
+    /// relative to the target there: the reference follows it until the next plan.
+    pub approach: Profile,
     /// T_c = [t0, t1] (absolute s); empty (t1 < t0) when no window is planned.
     pub window: (f64, f64),
     /// X_T,f and S_post.
@@ -132,6 +137,7 @@ impl DecisionPackage {
             contact_rel_heading: 0.0,
             push_speed: 0.0,
             envelope_lat: 1.0,
+            approach: Profile::new(0.0, 0.0, 0.0, 1.0, 1.0),
             window: (f64::INFINITY, f64::NEG_INFINITY),
             terminal: TerminalSet {
                 heading: 0.0,

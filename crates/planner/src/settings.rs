@@ -127,11 +127,12 @@ pub struct PlannerSettings {
     pub contact_angle: f64,
     pub overlap: f64,
     pub push_speed: f64,
-    /// Bullet approach model for the earliest arrival: closing speed relative to the target
-    /// near it and from afar (m/s; a distance d takes `min(d / near, 1.5 s + d / far)`),
-    /// lateral speed (m/s) and a settling time (s).
+    /// The bullet's approach ([`crate::approach::Profile`]): the largest relative closing
+    /// speed (m/s) and the relative acceleration as a share of the road's μ g (the approach
+    /// brakes as well as it closes, to arrive at rest beside the target); the lateral speed
+    /// (m/s) and a settling time (s) of the earliest arrival.
     pub approach_speed: f64,
-    pub approach_speed_far: f64,
+    pub approach_accel_g: f64,
     pub lateral_speed: f64,
     pub settle_time: f64,
     /// Stand-off outside the contact line while closing in (m).
@@ -212,8 +213,8 @@ impl Default for PlannerSettings {
             contact_angle: 12f64.to_radians(),
             overlap: 0.05,
             push_speed: 1.0,
-            approach_speed: 2.5,
-            approach_speed_far: 8.0,
+            approach_speed: 8.0,
+            approach_accel_g: 0.25,
             lateral_speed: 1.0,
             settle_time: 0.3,
             standoff: 0.6,
@@ -253,11 +254,10 @@ impl PlannerSettings {
         toml::to_string(self).expect("settings serialise")
     }
 
-    /// Time (s) the bullet takes to close a longitudinal distance `d` (m) on the target.
+    /// The approach's relative acceleration (m/s²) on a road of adhesion `mu`.
     #[must_use]
-    pub fn closing_time(&self, d: f64) -> f64 {
-        let d = d.abs();
-        (d / self.approach_speed).min(1.5 + d / self.approach_speed_far)
+    pub fn approach_accel(&self, mu: f64) -> f64 {
+        self.approach_accel_g * mu * dynamics::GRAVITY
     }
 
     /// Steps of the rollout.
@@ -288,7 +288,7 @@ impl PlannerSettings {
             ("corridor_fraction", self.corridor_fraction),
             ("trust_force_g", self.trust_force_g),
             ("approach_speed", self.approach_speed),
-            ("approach_speed_far", self.approach_speed_far),
+            ("approach_accel_g", self.approach_accel_g),
             ("lateral_speed", self.lateral_speed),
             ("heading_tol", self.heading_tol),
             ("stop_decel_fraction", self.stop_decel_fraction),

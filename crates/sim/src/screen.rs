@@ -17,10 +17,12 @@
 //! * kinematic: full acceleration `a = min(F_drive/m, μ g · rear static share)` from its
 //!   initial speed up to `v_cap = min(v_T0 + 10 m/s, 45 m/s, √(0.8 μ g R))`, and the lateral
 //!   move to the target's side in `2 √(Δd / (0.3 μ g))`;
-//! * the controller's own approach model (`planner::PlannerSettings`, its defaults, speeds
-//!   Froude-scaled by `√planner::length_scale`): closing a gap `d` on the target takes
-//!   `min(d / 2.5 m/s, 1.5 s + d / 8 m/s)`, the lateral move `Δd / 1 m/s` at the same time,
-//!   plus 0.3 s to settle. The controller does not approach faster than it plans to.
+//! * the controller's own approach model (`planner::approach::Profile` with the planner's
+//!   defaults, speeds Froude-scaled by `√planner::length_scale`): closing the gap from the
+//!   initial speed difference at up to 8 m/s relative, accelerating and braking at
+//!   0.25 μ g, to arrive at rest beside the target; the lateral move `Δd / 1 m/s` at the
+//!   same time; plus 0.3 s to settle. The controller does not approach faster than it plans
+//!   to.
 
 use crate::outcome::JudgeSettings;
 use crate::scenario::{Scenario, ScenarioError};
@@ -363,20 +365,29 @@ pub(crate) fn reach_time(
     let t_lat = 2.0 * (lateral / a_lat).sqrt();
     // The controller's approach model on the initial gap to the PIT pose.
     let gap = (sc.target.s - offset - sc.bullet.s).max(0.0);
-    let model = approach_time(params, gap, lateral);
+    let model = approach_time(params, sc.mu, gap, sc.bullet.vx - sc.target.vx, lateral);
     t_long.max(t_lat).max(model)
 }
 
-/// The controller's approach model (`planner::PlannerSettings::closing_time`, lateral speed
-/// and settling time, its defaults with speeds Froude-scaled to the vehicles): the time to
-/// close a longitudinal gap `gap` and a lateral offset `lateral` (m) to the PIT pose.
-pub(crate) fn approach_time(params: &ParamSet, gap: f64, lateral: f64) -> f64 {
+/// The controller's approach model (`planner::approach::Profile` with the planner's
+/// default approach speed, acceleration, lateral speed and settling time, speeds
+/// Froude-scaled to the vehicles): the time to close a longitudinal gap `gap` (m) at the
+/// relative speed `closing` (m/s) and a lateral offset `lateral` (m) to the PIT pose.
+pub(crate) fn approach_time(
+    params: &ParamSet,
+    mu: f64,
+    gap: f64,
+    closing: f64,
+    lateral: f64,
+) -> f64 {
     let s = planner::PlannerSettings::default();
     let froude = planner::length_scale(params).sqrt();
-    let scaled = planner::PlannerSettings {
-        approach_speed: s.approach_speed * froude,
-        approach_speed_far: s.approach_speed_far * froude,
-        ..s
-    };
-    scaled.settle_time + scaled.closing_time(gap).max(lateral / (s.lateral_speed * froude))
+    let along = planner::approach::Profile::new(
+        -gap,
+        closing,
+        0.0,
+        s.approach_accel(mu),
+        s.approach_speed * froude,
+    );
+    s.settle_time + along.time().max(lateral / (s.lateral_speed * froude))
 }

@@ -48,11 +48,11 @@ fn a_target_leaving_the_road_before_the_bullet_arrives_is_impossible() {
     let r = verdict(&v);
     assert_eq!(r.verdict, Verdict::Impossible, "{r:?}");
     assert!(r.t_fail.unwrap() < r.t_reach + lead);
-    // A slower drift with the bullet right behind and faster: it leaves the road only after
-    // the bullet could have pushed for `pit_lead`: kept.
+    // A slower drift with the bullet right behind and a little faster: it leaves the road
+    // only after the bullet could have turned it round (`pit_lead`): kept.
     v["bullet"]["s"] = json!(53.0);
-    v["bullet"]["vx"] = json!(20.0);
-    v["driver"]["steer"] = json!(0.002);
+    v["bullet"]["vx"] = json!(16.0);
+    v["driver"]["steer"] = json!(0.001);
     let r = verdict(&v);
     assert_eq!(r.verdict, Verdict::Keep, "{r:?}");
     assert!(r.t_fail.unwrap() >= r.t_reach + lead, "{r:?}");
@@ -64,16 +64,19 @@ fn a_target_leaving_the_road_before_the_bullet_arrives_is_impossible() {
 
 #[test]
 fn the_reach_bound_is_the_controllers_approach_model_where_that_is_slower() {
-    // 25 m behind at the target's speed: full acceleration would close in ~3.2 s, the
-    // controller's approach model (1.5 s + gap / 8 m/s, plus 0.3 s to settle) takes longer.
+    // 25 m behind at the target's speed: full acceleration would close in ~3.2 s; the
+    // controller's approach (accelerating and braking at 0.25 μ g to arrive at rest beside
+    // the target: 2 √(gap / a), plus 0.3 s to settle) takes longer.
     let mut v = common::straight();
     v["bullet"]["s"] = json!(30.0);
     v["bullet"]["vx"] = v["target"]["vx"].clone();
+    v["bullet"]["d"] = v["target"]["d"].clone();
     let r = verdict(&v);
     let sc = Scenario::from_json_line(&v.to_string(), 1).unwrap();
     let params = sc.params.load().unwrap();
     let gap = sc.target.s - (params.target.lr + params.bullet.cg_to_front) - sc.bullet.s;
-    let model = 0.3 + (gap / 2.5).min(1.5 + gap / 8.0);
+    let a = 0.25 * sc.mu * dynamics::GRAVITY;
+    let model = 0.3 + 2.0 * (gap / a).sqrt();
     assert!((r.t_reach - model).abs() < 1e-9, "{} vs {model}", r.t_reach);
 }
 
