@@ -378,14 +378,6 @@ impl PitController {
                     lane,
                 );
             }
-            if std::env::var_os("PICOPIT_DEBUG_REF").is_some() {
-                let pkg = self.planner.package();
-                let rel = crate::href::relative_position(&input.target, &input.bullet);
-                let st = &self.reference.stages[0];
-                let st9 = &self.reference.stages[9];
-                eprintln!("DBG t={:.2} {:?} mode={:?} win=({:.2},{:.2}) side={:?} crel=({:.2},{:.2}) rel=({:.2},{:.2}) ref0=({:.2},{:.2}) v0={:.2} fn=({:.0},{:.0}) ref9=({:.2},{:.2}) v9={:.2}",
-                    input.time, phase, pkg.mode, pkg.window.0, pkg.window.1, pkg.side, pkg.contact_rel_pos.x, pkg.contact_rel_pos.y, rel.x, rel.y, st.rel_pos.x, st.rel_pos.y, st.rel_speed, st.fn_lo, st.fn_hi, st9.rel_pos.x, st9.rel_pos.y, st9.rel_speed);
-            }
             self.mpc.set_pushing(phase == Phase::Pit);
             let out = self.mpc.solve(&MpcInput {
                 time: input.time,
@@ -398,12 +390,6 @@ impl PitController {
                 reference: &self.reference,
             })?;
             mpc_status = Some(out.status);
-            if std::env::var_os("PICOPIT_DEBUG_REF").is_some() {
-                let pl = self.mpc.plan();
-                let dv = |k: usize| pl.xb[k][3] - pl.xt[k][0];
-                eprintln!("DBG2 status={:?} plan dv: k1={:.2} k10={:.2} k20={:.2} u0=({:.3},{:.0}) u10=({:.3},{:.0}) xt0v={:.2} xt20v={:.2}",
-                    out.status, dv(1), dv(10), dv(20), pl.u[0][0], pl.u[0][1], pl.u[10][0], pl.u[10][1], pl.xt[0][0], pl.xt[20][0]);
-            }
             out.command
         } else {
             self.safe_stop(input)

@@ -914,7 +914,7 @@ impl Planner {
     /// with the road.
     fn stop_pose(&self, road: &Road, x: &TargetState) -> [f64; 3] {
         let v = rotate(x[idx::PSI], Vec2::new(x[idx::VX], x[idx::VY]));
-        let decel = self.settings.stop_decel_fraction * self.mu.max(0.05) * GRAVITY;
+        let decel = self.stop_decel(x);
         let t = v.norm() / (2.0 * decel);
         let f = road.project(Vec2::new(x[idx::X], x[idx::Y]));
         let (sh, ch) = f.heading.sin_cos();
@@ -924,6 +924,31 @@ impl Planner {
         let p = road.to_world(s_stop, f.d + v_d * t);
         let turn = road.pose_at(s_stop).heading - f.heading;
         [p.x, p.y, x[idx::PSI] + turn]
+    }
+
+    /// The deceleration (m/s²) of a target rolling on without force from state `x`: its tyres
+    /// sliding sideways take `stop_decel_fraction` of μ g; rolling along its body it keeps
+    /// only rolling resistance and its driveline (in gear: the engine's drag rolling forwards,
+    /// the stalled engine's hold rolling backwards); in between by the sine of the body slip.
+    fn stop_decel(&self, x: &TargetState) -> f64 {
+        let slide = self.settings.stop_decel_fraction * self.mu.max(0.05) * GRAVITY;
+        let speed = x[idx::VX].hypot(x[idx::VY]);
+        if speed < 1e-6 {
+            return slide;
+        }
+        let t = &self.params.target;
+        let per_nm = t.gear_ratio / (t.wheel_radius * t.mass);
+        let driveline = t.powertrain.as_ref().map_or(0.0, |pt| {
+            per_nm
+                * if x[idx::VX] < 0.0 {
+                    pt.stall_torque
+                } else {
+                    pt.engine_drag_torque
+                }
+        });
+        let roll = t.rolling_resistance * GRAVITY + driveline;
+        let sin_slip = x[idx::VY].abs() / speed;
+        roll.min(slide) + (slide - roll).max(0.0) * sin_slip
     }
 
     /// The least road margin (beyond `road_margin`) of the target's footprint while it rolls

@@ -97,8 +97,7 @@ pub fn fill_reference(
     match pkg.mode {
         Mode::Pit => {
             let (t0, t1) = pkg.window;
-            let approach =
-                Approach::new(pkg, rel, stand, time, s, behind_x, ls);
+            let approach = Approach::new(pkg, rel, stand, time, s, behind_x, ls);
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
                 *st = if tau < t0 - s.turn_in {

@@ -150,8 +150,9 @@ pub struct PlannerSettings {
     /// `lane_keep` (a lane keeper of the line the target is on, gain 1, its brake held;
     /// `docs/planner.md`).
     pub target_driver: TargetDriverModel,
-    /// Deceleration of the spun, sliding target used for the post-PIT stopping point
-    /// (fraction of μ g).
+    /// Deceleration of the spun target for the post-PIT stopping point while its tyres slide
+    /// sideways (fraction of μ g; rolling along its body it slows only by its rolling
+    /// resistance and driveline, `Planner`'s stopping model).
     pub stop_decel_fraction: f64,
     /// Road-edge margin of the target's footprint (m). 0 at full size: the success test asks
     /// for the footprint inside the road, and a 0.2 m margin made the PicoPINN's planner

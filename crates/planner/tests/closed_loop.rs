@@ -1,7 +1,9 @@
 //! The whole controller on the plant (the truth): a PIT on a straight three-lane road at
 //! 15 m/s from behind either side reverses the target, which comes to rest inside the road
-//! (its driver brakes half a second after the contact, as in `picopit simulate`); the same
-//! maneuver without the upper layer (the paper's ablation) runs through its phases as well.
+//! (its driver holds its speed with the throttle until the contact and lets go of it then,
+//! as an out-of-control driver of the dataset does; in gear, its stalled engine stops it);
+//! the same maneuver without the upper layer (the paper's ablation) runs through its phases
+//! as well.
 
 use dynamics::params::ParamSet;
 use dynamics::plant::{Plant, PlantConfig, VehicleInit};
@@ -66,13 +68,10 @@ fn run(side: f64, upper: bool) -> Run {
     let mut phases = vec![Phase::Chasing];
     let mut plans = 0;
     let mut first_contact: Option<f64> = None;
-    let brake = 0.6 * params.target.brake_torque_max;
     for step in 0..240 {
         let time = step as f64 * dt;
-        // The target's driver holds 15 m/s with the throttle until the contact, lets go,
-        // and brakes from half a second after it.
+        // The target's driver holds 15 m/s with the throttle until the contact, then lets go.
         let target_input = match first_contact {
-            Some(t) if time >= t + 0.5 => TargetInput::new(0.0, brake),
             Some(_) => TargetInput::zeros(),
             None => TargetInput::new(0.0, -params.target.cruise_wheel_torque(15.0)),
         };
