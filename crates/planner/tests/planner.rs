@@ -125,11 +125,12 @@ fn the_package_is_consistent_on_scripted_situations() {
     let road = road();
     let cases = [
         // (rel x, rel y, v target, v bullet, expected mode). The contact window (0.8 s) must
-        // fit the 2 s look-ahead after the bullet's earliest arrival, so a bullet 5 m back
-        // commits; from 6 m back (arrival ≈ 1.3 s) it still chases.
-        (-5.0, 2.5, 15.0, 17.0, Mode::Pit),
+        // fit the 2 s look-ahead after the bullet's earliest arrival (the approach profile,
+        // at rest beside the contact pose, plus 0.3 s to settle), so the bullet commits once
+        // it is within about half a metre of its contact station; 6 m or 30 m back it chases.
+        (-4.3, 2.2, 15.0, 16.0, Mode::Pit),
         (-6.0, 2.5, 15.0, 17.0, Mode::Chase),
-        (-5.0, -2.4, 15.0, 16.0, Mode::Pit),
+        (-4.3, -2.2, 15.0, 16.0, Mode::Pit),
         (-30.0, 3.0, 15.0, 17.0, Mode::Chase),
         (-3.7, 2.0, 15.0, 16.0, Mode::Pit),
     ];
@@ -160,7 +161,7 @@ fn the_package_is_consistent_on_scripted_situations() {
 fn an_obstacle_where_the_target_would_spin_changes_the_decision_or_aborts() {
     let s = PlannerSettings::default();
     let road = road();
-    let (xt, xb) = states(&road, -5.0, 2.5, 15.0, 17.0);
+    let (xt, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
     let mut p = planner(s.clone());
     let free = p.plan(&input(&road, &[], xt, xb)).unwrap().clone();
     assert_eq!(free.mode, Mode::Pit);
@@ -220,7 +221,7 @@ fn no_feasible_decision_is_reported_with_its_reason() {
 #[test]
 fn the_same_inputs_give_the_same_package() {
     let road = road();
-    let (xt, xb) = states(&road, -5.0, 2.5, 15.0, 17.0);
+    let (xt, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
     let obstacles = [Obstacle {
         x: 150.0,
         y: -3.5,
@@ -234,7 +235,7 @@ fn the_same_inputs_give_the_same_package() {
     let mut b = planner(PlannerSettings::default());
     let pa = a.plan(&input(&road, &obstacles, xt, xb)).unwrap().clone();
     // b plans something else first: no state may leak between plans.
-    let (xt2, xb2) = states(&road, -5.0, -2.4, 15.0, 16.0);
+    let (xt2, xb2) = states(&road, -4.3, -2.2, 15.0, 16.0);
     b.plan(&input(&road, &[], xt2, xb2)).unwrap();
     let pb = b.plan(&input(&road, &obstacles, xt, xb)).unwrap().clone();
     assert_eq!(pa, pb);
@@ -264,7 +265,7 @@ fn bad_input_is_an_error_not_a_panic() {
         };
         planner::MAX_OBSTACLES + 1
     ];
-    let (xt, xb) = states(&road, -5.0, 2.5, 15.0, 17.0);
+    let (xt, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
     assert_eq!(
         p.plan(&input(&road, &many, xt, xb)).unwrap_err(),
         planner::PlanError::TooManyObstacles
@@ -336,7 +337,7 @@ fn judging_a_plans_own_push_gives_its_verdict() {
     };
     let road = road();
     let mut p = planner(s.clone());
-    let (xt, xb) = states(&road, -5.0, 2.5, 15.0, 17.0);
+    let (xt, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
     let inp = input(&road, &[], xt, xb);
     let pkg = p.plan(&inp).unwrap().clone();
     assert_eq!(pkg.mode, Mode::Pit, "{:?}", pkg.infeasible);

@@ -345,17 +345,16 @@ fn first_in(r: &sim::EpisodeResult, phase: planner::Phase) -> Option<f64> {
         .map(|s| s.time)
 }
 
-/// `sc-00034` with the PicoPINN in both layers: after the first impact the target spins
-/// (44° turned at 3.85 s), the in-contact replan finds no push that meets the reversal
-/// (its best misses by 2.3 rad: the PicoPINN has the spun target slide on at 3.7 m/s
-/// after 2 s, the plant 1.3), and a bullet that presses on with that plan is still faster
-/// than the target when the PIT ends and runs into it (an unsafe rebound at 4.46 s). With
-/// `let_go_turn` the bullet lets go at that replan and the target settles reversed.
+/// Textbook scene `sc-00017` with the PicoPINN in both layers: once the push has turned
+/// the target past `let_go_turn`, an in-contact replan that finds no push meeting the
+/// reversal ends the PIT, and the target settles reversed inside the road; a bullet that
+/// presses on with that plan ends the PIT later and pushes the target over the edge.
 #[test]
 fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenarios.jsonl");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../data/textbook/scenarios.jsonl");
     let all = sim::load_jsonl(path).unwrap();
-    let sc = all.iter().find(|s| s.id == "sc-00034").unwrap();
+    let sc = all.iter().find(|s| s.id == "sc-00017").unwrap();
     let mut cfg = config("picopinn");
     cfg.record = true;
     assert!(cfg.controller.phases.let_go_turn < 0.5);
@@ -365,7 +364,7 @@ fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
     assert!(let_go.success(), "{:?}", let_go.metrics);
     assert_eq!(
         press_on.cause(),
-        Some(FailureCause::UnsafeRebound),
+        Some(FailureCause::BoundaryViolation),
         "{:?}",
         press_on.metrics
     );
@@ -373,8 +372,5 @@ fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
         first_in(&let_go, planner::Phase::Stabilising).unwrap(),
         first_in(&press_on, planner::Phase::Stabilising).unwrap(),
     );
-    assert!(
-        a < 4.0 && b > a + 0.2,
-        "let go at {a} s, pressed on until {b} s"
-    );
+    assert!(b > a, "let go at {a} s, pressed on until {b} s");
 }
