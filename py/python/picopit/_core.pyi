@@ -584,6 +584,8 @@ class EpisodeResult(TypedDict):
     boundary_violation: bool
     secondary_collision: bool
     contacts: int
+    contact_at: Optional[float]
+    """s, time of the first bullet-target contact; None without contact."""
     impact_speed: Optional[float]
     """m/s, |v_B - v_T| of the two c.g. at the first contact; None without contact."""
     impact_angle: Optional[float]
@@ -595,6 +597,9 @@ class EpisodeResult(TypedDict):
     reversed_speed: Optional[float]
     """s and m/s: time and target speed at its first observation within eps_psi of the
     reversed heading; None if it never reversed."""
+    failed_vehicle: Optional[str]
+    """``bullet``, ``target`` or ``both``: who crossed the edge or hit the obstacle that
+    decided a boundary violation or secondary collision; None otherwise."""
     sim_time: float
     control_steps: int
     plan_count: int
