@@ -25,6 +25,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use std::fmt::Debug;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 /// The iceoryx2 service flavour: inter-process, shared memory.
@@ -134,10 +135,22 @@ pub fn node(name: &str) -> Result<Node<Svc>, PortError> {
         .map_err(|e| PortError::Node(format!("{e:?}")))
 }
 
-/// Whether SIGINT or SIGTERM has arrived (checked without blocking).
+/// Set once SIGINT or SIGTERM has been seen (iceoryx2 reports each signal once).
+static TERMINATION: AtomicBool = AtomicBool::new(false);
+
+/// Whether SIGINT or SIGTERM has arrived (checked without blocking). Once true, it stays
+/// true for the life of the process: iceoryx2's signal handler reports a signal to the first
+/// caller only, so a loop that checks in two places would otherwise miss it in the second.
 #[must_use]
 pub fn termination_requested(node: &Node<Svc>) -> bool {
-    node.wait(Duration::ZERO).is_err()
+    if TERMINATION.load(Ordering::Relaxed) {
+        return true;
+    }
+    let requested = node.wait(Duration::ZERO).is_err();
+    if requested {
+        TERMINATION.store(true, Ordering::Relaxed);
+    }
+    requested
 }
 
 /// Open (or create) a publish-subscribe service with the shared quality of service.

@@ -328,6 +328,8 @@ struct Latencies {
 }
 
 const SENT_RING: usize = 256;
+/// The most cycles whose latencies the vehicle keeps (4 × 8 MiB, preallocated).
+pub const MAX_LATENCY_SAMPLES: usize = 1 << 20;
 
 impl Latencies {
     fn new(n: usize) -> Self {
@@ -389,7 +391,8 @@ pub fn run_vehicle<B: VehicleBridge>(
     let steps_per = (period_ns / step_ns).max(1) as usize;
     // Real time: apply commands on arrival, at the next 5 ms sub-tick.
     let sub_steps = ((5_000_000 / step_ns).max(1) as usize).min(steps_per);
-    let max_periods = (max_time / s.period).ceil() as usize + 2;
+    // Latency samples of at most `MAX_LATENCY_SAMPLES` cycles (a long soak keeps the first).
+    let max_periods = ((max_time / s.period).ceil() as usize + 2).min(MAX_LATENCY_SAMPLES);
     let mut lat = Latencies::new(max_periods);
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed ^ 0x5eed_fa17);
     let mut hb = heartbeat(PEER_VEHICLE);

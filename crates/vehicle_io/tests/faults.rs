@@ -7,7 +7,8 @@
 //! - SIGSTOP the vehicle for 0.05–0.5 s, then SIGCONT: both carry on and end cleanly;
 //! - either start order works;
 //! - a missing or vanished peer is waited for a bounded time, then the process exits with
-//!   status 1 and says why.
+//!   status 1 and says why;
+//! - SIGTERM ends the vehicle promptly, on the wall clock and in lock step.
 //!
 //! Every process is bounded by a timeout. The binaries are the test profile's (debug): the
 //! controller runs the 4-DOF model without the upper layer and without a deadline, so that
@@ -43,21 +44,17 @@ fn options<'a>(defaults: &[(&'a str, &'a str)], extra: &[&'a str]) -> Vec<&'a st
 fn vehicle(p: &str, dir: &Path, max_time: f64, extra: &[&str]) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_pit-vehicle"));
     c.current_dir(root())
-        .args([
-            "--scenario",
-            common::TRIALS,
-            "--id",
-            "R1",
-            "--clock",
-            "wall",
-        ])
+        .args(["--scenario", common::TRIALS, "--id", "R1"])
         .args(["--prefix", p])
         .args(["--max-time", &max_time.to_string()])
         .arg("--summary")
         .arg(dir.join("vehicle.json"))
         .arg("--record")
         .arg(dir.join("vehicle.mcap"))
-        .args(options(&[("--connect-timeout", "60")], extra))
+        .args(options(
+            &[("--clock", "wall"), ("--connect-timeout", "60")],
+            extra,
+        ))
         .stdout(Stdio::null())
         .stderr(Stdio::null());
     c
@@ -66,20 +63,17 @@ fn vehicle(p: &str, dir: &Path, max_time: f64, extra: &[&str]) -> Command {
 fn controller(p: &str, dir: &Path, extra: &[&str]) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_pit-controller"));
     c.current_dir(root())
-        .args([
-            "--scenario",
-            common::TRIALS,
-            "--id",
-            "R1",
-            "--clock",
-            "wall",
-        ])
+        .args(["--scenario", common::TRIALS, "--id", "R1"])
         .args(["--prefix", p, "--controller-config", HALF])
         .args(["--model", "4dof", "--no-upper-layer", "--deadline", "60"])
         .arg("--summary")
         .arg(dir.join("controller.json"))
         .args(options(
-            &[("--connect-timeout", "60"), ("--peer-lost-timeout", "10")],
+            &[
+                ("--clock", "wall"),
+                ("--connect-timeout", "60"),
+                ("--peer-lost-timeout", "10"),
+            ],
             extra,
         ))
         .stdout(Stdio::null())
@@ -302,4 +296,38 @@ fn a_missing_or_vanished_peer_is_waited_for_a_bounded_time_then_named() {
         s["fallbacks"].as_u64().unwrap() >= 1,
         "it fell back first: {s}"
     );
+}
+
+#[test]
+fn sigterm_ends_the_vehicle_promptly_on_either_clock() {
+    // The vehicle checks for SIGTERM while it waits for a command and again at the end of
+    // each period; iceoryx2 reports the signal to the first check only.
+    for i in 0..10 {
+        let name = format!("term-{i}");
+        let dir = out_dir(SUITE, &name);
+        let p = prefix(SUITE, &name);
+        let lock_step = i % 2 == 1;
+        let (vc, cc) = if lock_step {
+            (
+                vec!["--clock", "simulated", "--lockstep-timeout", "5"],
+                vec!["--clock", "vehicle", "--peer-lost-timeout", "1"],
+            )
+        } else {
+            (vec![], vec!["--peer-lost-timeout", "1"])
+        };
+        let mut v = vehicle(&p, &dir, 30.0, &vc).spawn().unwrap();
+        let mut c = controller(&p, &dir, &cc).spawn().unwrap();
+        wait_for_messages(&dir.join("vehicle.mcap"), "/state", 10 + i, LIMIT);
+        signal(&v, libc::SIGTERM);
+        let st = try_wait(&mut v, Duration::from_secs(10));
+        assert!(
+            st.is_some(),
+            "{name}: pit-vehicle ignored SIGTERM (lock step {lock_step})"
+        );
+        assert_eq!(st.unwrap().code(), Some(0), "{name}");
+        let s = json(&dir.join("vehicle.json"));
+        assert_eq!(s["ending"], "interrupted", "{name}: {s}");
+        // Its controller gives up on the vanished vehicle.
+        assert_eq!(wait(&mut c, LIMIT, "pit-controller").code(), Some(1));
+    }
 }
