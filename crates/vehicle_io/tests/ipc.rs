@@ -215,6 +215,17 @@ fn bad_input_is_refused_with_its_name() {
     std::fs::write(&cfg, "perod = 0.05\n").unwrap();
     let err = refused(env!("CARGO_BIN_EXE_pit-controller"), &config);
     assert!(err.contains("perod"), "{err}");
+
+    // A summary that could not be written is refused before the run, not after it.
+    for bin in [
+        env!("CARGO_BIN_EXE_pit-vehicle"),
+        env!("CARGO_BIN_EXE_pit-controller"),
+    ] {
+        for path in ["/proc/picopit-x/s.json", "/tmp"] {
+            let err = refused(bin, &["--id", "R1", "--summary", path]);
+            assert!(err.contains("--summary") && err.contains(path), "{err}");
+        }
+    }
 }
 
 /// Run `bin` on the trial scenarios with `args`: it must exit with status 2; its stderr.

@@ -8,7 +8,7 @@
 use clap::{Parser, ValueEnum};
 use planner::{ControllerSettings, PitController};
 use std::path::PathBuf;
-use vehicle_io::cli::{fail, load_scenario, read_text, write_json};
+use vehicle_io::cli::{check_writable, fail, load_scenario, read_text, write_json};
 use vehicle_io::config::{ControllerClock, ControllerIoSettings};
 use vehicle_io::control::ControlLoop;
 use vehicle_io::ports::{ControllerPorts, ServiceNames};
@@ -182,6 +182,9 @@ fn main() {
     }
     let mut s = s;
     s.models_dir = resolve_models_dir(&s.models_dir);
+    if let Some(p) = &args.summary {
+        check_writable(p, "--summary").unwrap_or_else(|e| fail(&e));
+    }
     let sc = load_scenario(&args.scenario, &args.id).unwrap_or_else(|e| fail(&e));
     let params = sc.params.load().unwrap_or_else(|e| fail(&e.to_string()));
     let road = sc.build_road().unwrap_or_else(|e| fail(&e.to_string()));

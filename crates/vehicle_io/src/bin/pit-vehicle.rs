@@ -6,7 +6,7 @@
 
 use clap::{Parser, ValueEnum};
 use std::path::PathBuf;
-use vehicle_io::cli::{fail, load_scenario, read_text, write_json};
+use vehicle_io::cli::{check_writable, fail, load_scenario, read_text, write_json};
 use vehicle_io::config::{VehicleClock, VehicleIoSettings};
 use vehicle_io::ports::{ServiceNames, VehiclePorts};
 use vehicle_io::vehicle::SimBridge;
@@ -177,6 +177,9 @@ fn main() {
             toml::to_string(&s).unwrap_or_else(|e| fail(&e.to_string()))
         );
         return;
+    }
+    if let Some(p) = &args.summary {
+        check_writable(p, "--summary").unwrap_or_else(|e| fail(&e));
     }
     let sc = load_scenario(&args.scenario, &args.id).unwrap_or_else(|e| fail(&e));
     let params = sc.params.load().unwrap_or_else(|e| fail(&e.to_string()));
