@@ -280,8 +280,9 @@ def _replay_parser(sub) -> None:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from .replay import figure_path, replay
+    from .replay import check_source, figure_path, replay
 
+    check_source(args.file)
     png = check_file(figure_path(args.file, args.out), "--out" if args.out else "the figure (FILE.png)")
     _, png, summary = replay(args.file, png)
     print(summary)

@@ -202,6 +202,15 @@ def _complete_prefix(data: bytes) -> Tuple[int, bool]:
     return off, False
 
 
+def check_source(path: "str | Path") -> Path:
+    """``path`` as a Path; raises :class:`ReplayError` when it exists but is not a regular file
+    (a folder, or a device such as ``/dev/zero`` that would be read until memory runs out)."""
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise ReplayError(f"{path}: not a regular file")
+    return path
+
+
 def read_recording(path: "str | Path") -> Recording:
     """Read every message of ``path`` with the MCAP stream reader (also a truncated file).
 
@@ -211,9 +220,7 @@ def read_recording(path: "str | Path") -> Recording:
     from mcap.records import Channel, Message, Metadata, Schema
     from mcap.stream_reader import StreamReader
 
-    path = Path(path)
-    if path.exists() and not path.is_file():
-        raise ReplayError(f"{path}: not a regular file")
+    path = check_source(path)
     try:
         data = path.read_bytes()
     except FileNotFoundError:
