@@ -718,12 +718,8 @@ impl Scenario {
                 p_in_world: dynamics::geometry::Vec2::new(w.x, w.y),
                 yaw: w.yaw,
             };
-            let fp = dynamics::geometry::Obb::vehicle_footprint(
-                &pose,
-                p.length,
-                p.width,
-                p.cg_to_front,
-            );
+            let fp =
+                dynamics::geometry::Obb::vehicle_footprint(&pose, p.length, p.width, p.cg_to_front);
             for (i, o) in self.obstacles.iter().enumerate() {
                 if dynamics::contact::obb_signed_distance(&fp, &o.body.footprint_at(0.0)) < 0.0 {
                     return Err(ScenarioError::field(
