@@ -57,9 +57,10 @@ def _yaw_pose(x: float, y: float, psi: float) -> dict:
             "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(psi / 2), "w": math.cos(psi / 2)}}
 
 
-def write_recording(path: Path, n: int = N, finish: bool = True) -> int:
+def write_recording(path: Path, n: int = N, finish: bool = True, edit=None) -> int:
     """Write ``n`` steps of every topic; returns the messages written. Without ``finish`` the
-    file is left as a killed process leaves it (no summary, no footer)."""
+    file is left as a killed process leaves it (no summary, no footer). ``edit(topic, k, msg)``
+    may change a message before it is written (returning the message to write)."""
     fh = open(path, "wb")
     w = Writer(fh, compression=CompressionType.NONE, use_chunking=False)
     w.start(profile="", library="test")
@@ -79,6 +80,8 @@ def write_recording(path: Path, n: int = N, finish: bool = True) -> int:
 
     def put(topic: str, log: int, pub: int, msg: dict) -> None:
         nonlocal count
+        if edit is not None:
+            msg = edit(topic, log // DT_NS, msg)
         w.add_message(channel_id=ch[topic], log_time=log, publish_time=pub,
                       data=json.dumps(msg).encode(), sequence=count)
         count += 1
@@ -184,3 +187,108 @@ def test_not_mcap_and_missing_files_give_a_clean_error(tmp_path: Path, capsys) -
     empty = tmp_path / "empty.mcap"
     empty.write_bytes(b"")
     assert cli.main(["replay", str(empty)]) == 2
+
+
+def _set(topic: str, k: int, field: str, value, raw: bool = False):
+    """An ``edit`` that sets (or, with value ``...``, deletes) ``field`` of message ``k`` on
+    ``topic``."""
+    def edit(t, kk, msg):
+        if t == topic and kk == k:
+            msg = dict(msg)
+            if value is ...:
+                del msg[field]
+            else:
+                msg[field] = value
+        return msg
+    return edit
+
+
+@pytest.mark.parametrize("topic,field,value,needle", [
+    ("/state", "stamp_ns", ..., "`stamp_ns` is missing"),
+    ("/command", "stamp_ns", ..., "`stamp_ns` is missing"),
+    ("/status", "faults", ..., "`faults` is missing"),
+    ("/state", "stamp_ns", 1e30, "not an integer"),
+    ("/state", "stamp_ns", -5, "outside [0, 2^63)"),
+    ("/state", "stamp_ns", 2 ** 70, "outside [0, 2^63)"),
+    ("/command", "mode", 1e300, "not an integer"),
+    ("/command", "mode", 2 ** 40, "outside [0, 2^32)"),
+    ("/status", "phase", "pit", "not an integer"),
+    ("/command", "steer", "left", "not a number"),
+    ("/command", "torque", 1e300, "larger than"),
+    ("/state", "bullet", [1.0, 2.0], "not an array of 6 numbers"),
+    ("/state", "bullet", [0.0, 0.0, 0.0, 1e308, 0.0, 0.0], "[3]"),
+    ("/state", "target", "all of it", "not an array of 8 numbers"),
+])
+def test_messages_that_parse_but_lack_fields_or_hold_absurd_values_name_topic_and_field(
+        tmp_path: Path, capsys, topic, field, value, needle) -> None:
+    path = tmp_path / "odd.mcap"
+    write_recording(path, n=20, edit=_set(topic, 7, field, value))
+    with pytest.raises(ReplayError) as e:
+        replay(path)
+    msg = str(e.value)
+    assert f"{topic} message 8" in msg and f"`{field}`" in msg and needle in msg, msg
+    assert cli.main(["replay", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and f"{topic} message 8" in err
+    assert len(err.strip().splitlines()) == 1, err
+
+
+def test_a_message_that_is_not_an_object_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "odd.mcap"
+    write_recording(path, n=10, edit=lambda t, k, m: [1, 2] if (t, k) == ("/status", 3) else m)
+    with pytest.raises(ReplayError, match=r"/status message 4: not a JSON object"):
+        replay(path)
+
+
+def test_non_finite_states_recorded_as_null_are_drawn_as_gaps(tmp_path: Path) -> None:
+    # The recorder writes a non-finite number as null: every pose null is still a figure.
+    path = tmp_path / "nulls.mcap"
+    write_recording(path, n=20, edit=lambda t, k, m: dict(m, bullet=[None] * 6, target=[None] * 8)
+                    if t == "/state" else m)
+    rec, png, summary = replay(path)
+    assert png.stat().st_size > 0 and "final speeds: bullet nan m/s" in summary
+
+
+def test_absurd_boxes_and_road_points_fall_back_instead_of_breaking_the_axes(tmp_path: Path) -> None:
+    def edit(t, k, m):
+        if t == "/scene" and k == 0:
+            ents = [dict(e, lines=[{"points": [{"x": 1e308, "y": 0.0}, {"x": "a"}, 5]}, "x"])
+                    if e.get("id") == "road" else e for e in m["entities"]]
+            return dict(m, entities=ents)
+        return m
+    path = tmp_path / "odd.mcap"
+    write_recording(path, n=10, edit=edit)
+    rec, png, _ = replay(path)
+    assert rec.road() == [[]] and png.exists()
+    rec.metadata["bullet.length"] = "1e308"
+    assert rec.box("bullet") == (4.8, 1.85, 1.45)
+
+
+def test_a_device_is_not_read(capsys) -> None:
+    # /dev/zero used to be read until memory ran out.
+    assert cli.main(["replay", "/dev/zero"]) == 2
+    err = capsys.readouterr().err
+    assert "/dev/zero: not a regular file" in err and "Traceback" not in err
+
+
+def test_out_naming_a_folder_writes_into_it(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "run.mcap"
+    write_recording(path, n=10)
+    folder = tmp_path / "figs"
+    folder.mkdir()
+    assert cli.main(["replay", str(path), "--out", str(folder)]) == 0
+    assert (folder / "run.png").exists() and not (tmp_path / "figs.png").exists()
+    new = tmp_path / "new"
+    assert cli.main(["replay", str(path), "--out", f"{new}/"]) == 0
+    assert (new / "run.png").exists()
+    assert cli.main(["replay", str(path), "--out", str(tmp_path / "fig.jpg")]) == 2
+    assert "ending in .png" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("out", ["/proc/picopit-x/fig.png", "/dev/full"])
+def test_an_unwritable_out_is_refused_before_reading(tmp_path: Path, capsys, out) -> None:
+    path = tmp_path / "run.mcap"
+    write_recording(path, n=10)
+    assert cli.main(["replay", str(path), "--out", out]) == 2
+    err = capsys.readouterr().err
+    assert out.split("/")[1] in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err

@@ -89,6 +89,10 @@ def test_parse_cases():
         trials.parse_cases("R9", ["R1"])
     with pytest.raises(trials.TrialsError, match="repeated"):
         trials.parse_cases("R1,R1", ["R1"])
+    # An empty list is not "every case".
+    for empty in ("", " ", ","):
+        with pytest.raises(trials.TrialsError, match="no case given"):
+            trials.parse_cases(empty, ["R1", "R2"])
 
 
 # --- CLI errors ---------------------------------------------------------------------------
@@ -116,6 +120,59 @@ def test_cli_bad_options(tmp_path, capsys):
     assert "unknown case 'R9'" in capsys.readouterr().err
     assert cli.main(["trials", "--half-scale", "--scenarios", str(tmp_path / "none.jsonl")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def _fake_bins(folder: Path) -> Path:
+    """pit-vehicle and pit-controller stand-ins: the vehicle "succeeds" on R1 (a summary with
+    success) and exits with status 3 on any other case; the controller exits at once."""
+    import sys
+
+    folder.mkdir(parents=True, exist_ok=True)
+    vehicle = folder / "pit-vehicle"
+    vehicle.write_text(
+        f"#!{sys.executable}\n"
+        "import json, sys\n"
+        "a = sys.argv\n"
+        "if a[a.index('--id') + 1] != 'R1':\n"
+        "    print('pit-vehicle: error: stand-in failure', file=sys.stderr); sys.exit(3)\n"
+        "json.dump({'success': True, 'ending': 'finished', 'metrics': {'success': True}},\n"
+        "          open(a[a.index('--summary') + 1], 'w'))\n")
+    controller = folder / "pit-controller"
+    controller.write_text(f"#!{sys.executable}\nimport sys\nsys.exit(0)\n")
+    for f in (vehicle, controller):
+        f.chmod(0o755)
+    return folder
+
+
+def test_cli_empty_cases_is_refused(tmp_path, capsys):
+    bins = _fake_bins(tmp_path / "bin")
+    assert cli.main(["trials", "--half-scale", "--cases", "", "--bin-dir", str(bins),
+                     "--out", str(tmp_path / "o")]) == 2
+    assert "no case given" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("opt,value", [("--out", "/proc/picopit-x"), ("--json", "/dev/full"),
+                                       ("--json", "/proc/picopit-x/t.json")])
+def test_cli_unwritable_outputs_are_refused_before_any_run(tmp_path, capsys, opt, value):
+    bins = _fake_bins(tmp_path / "bin")
+    args = ["trials", "--half-scale", "--cases", "R1", "--repeats", "0", "--bin-dir", str(bins),
+            "--no-progress", "--no-figures"]
+    args += [opt, value] + (["--out", str(tmp_path / "o")] if opt != "--out" else [])
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err
+    assert value in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "o" / "R1").exists(), "nothing ran"
+
+
+def test_cli_runs_that_errored_make_the_exit_status_1_with_the_count(tmp_path, capsys):
+    bins = _fake_bins(tmp_path / "bin")
+    rc = cli.main(["trials", "--half-scale", "--cases", "R1,R2", "--repeats", "0", "--bin-dir", str(bins),
+                   "--out", str(tmp_path / "o"), "--no-progress", "--no-figures"])
+    captured = capsys.readouterr()
+    assert rc == 1, captured.err
+    assert "1 of 2 runs did not complete" in captured.err
+    assert "stand-in failure" in captured.out
 
 
 def test_find_bin_dir_order(tmp_path):

@@ -72,6 +72,14 @@ pub enum ModelError {
         value: i64,
         len: usize,
     },
+    /// The network does not run: a non-finite output (or input-Jacobian row) on its own
+    /// normalisation statistics, although every number in the file is finite.
+    #[error("the network gives {output} = {value} at {at}: a model must give finite outputs on its own normalisation statistics (are its weights absurd?)")]
+    DoesNotRun {
+        at: &'static str,
+        output: &'static str,
+        value: f64,
+    },
     /// A road adhesion outside the model's trained range (or not finite).
     #[error("mu = {value}: must be finite and within the model's mu_range [{lo}, {hi}] (the road adhesion it was trained on)")]
     Mu { value: f64, lo: f64, hi: f64 },

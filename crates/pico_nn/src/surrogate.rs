@@ -121,7 +121,7 @@ impl SurrogateModel {
     /// [`ModelError`] naming the metadata key or tensor at fault.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, ModelError> {
         let p = format::parse(bytes)?;
-        Ok(Self {
+        let mut m = Self {
             net: Mlp::from_parsed(&p),
             kind: p.kind,
             dt: p.dt,
@@ -131,7 +131,49 @@ impl SurrogateModel {
             metadata: p.metadata,
             base: p.base,
             jz: [[0.0; N_IN]; N_OUT],
-        })
+        };
+        m.check_runs(&p.in_mean, &p.in_std)?;
+        Ok(m)
+    }
+
+    /// A model must run: finite increments at its own input mean and one standard
+    /// deviation either side (all features at once), and a finite input Jacobian at the
+    /// mean. Finite weights can still overflow (θ = 1e308 passes every other check).
+    fn check_runs(
+        &mut self,
+        mean: &[f64; N_FEATURES],
+        std: &[f64; N_FEATURES],
+    ) -> Result<(), ModelError> {
+        for (at, k) in [
+            ("in_mean", 0.0),
+            ("in_mean + in_std", 1.0),
+            ("in_mean - in_std", -1.0),
+        ] {
+            let z: [f64; N_FEATURES] = std::array::from_fn(|j| mean[j] + k * std[j]);
+            let o = self.forward_features(&z);
+            if let Some(i) = o.iter().position(|v| !v.is_finite()) {
+                return Err(ModelError::DoesNotRun {
+                    at,
+                    output: format::OUTPUTS[i],
+                    value: o[i],
+                });
+            }
+        }
+        let z: [f64; N_IN] = std::array::from_fn(|j| mean[j]);
+        let _ = self.net.forward_jac(&z, &mut self.jz);
+        if let Some(i) = self
+            .jz
+            .iter()
+            .position(|row| row.iter().any(|v| !v.is_finite()))
+        {
+            let value = self.jz[i].iter().copied().find(|v| !v.is_finite());
+            return Err(ModelError::DoesNotRun {
+                at: "in_mean",
+                output: format::OUTPUTS[i],
+                value: value.unwrap_or(f64::NAN),
+            });
+        }
+        Ok(())
     }
 
     /// The same model on a road of adhesion `mu`.

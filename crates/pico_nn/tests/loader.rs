@@ -430,3 +430,16 @@ fn random_corruption_never_panics() {
         "only {refused} of {trials} corrupted files refused"
     );
 }
+
+#[test]
+fn a_model_whose_network_overflows_is_refused_by_running_it() {
+    // Finite everywhere, so every other check passes; the forward pass overflows.
+    for (name, value) in [("theta", 1e308_f64), ("out_std", 1e308), ("base", 1e308)] {
+        let mut s = base();
+        let t = s.tensor_mut(name);
+        let n = t.data.len() / 8;
+        t.data = (0..n).flat_map(|_| value.to_le_bytes()).collect();
+        let e = refuse(&s, &["finite outputs", "in_mean"]);
+        assert!(matches!(e, ModelError::DoesNotRun { .. }), "{name}: {e:?}");
+    }
+}

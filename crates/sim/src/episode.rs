@@ -646,7 +646,8 @@ fn load_model(
 /// `model_path` instead, when given).
 ///
 /// # Errors
-/// [`EpisodeError::Model`] naming the file that cannot be loaded or does not cover μ.
+/// [`EpisodeError::Model`] naming the file that cannot be loaded, does not cover μ, or was
+/// trained on another parameter set than the scenario's.
 pub fn target_model(
     model: ModelKind,
     models_dir: &Path,
@@ -660,13 +661,25 @@ pub fn target_model(
         (Some(p), Some(_)) => p.to_path_buf(),
         (None, Some(p)) => p,
     };
-    pico_nn::SurrogateModel::from_path(&path)
+    let model = pico_nn::SurrogateModel::from_path(&path)
         .and_then(|m| m.with_mu(sc.mu))
-        .map(|m| Box::new(m) as Box<dyn TargetModel + Send + Sync>)
         .map_err(|e| EpisodeError::Model {
-            path,
+            path: path.clone(),
             message: e.to_string(),
-        })
+        })?;
+    // A model learned on one parameter set says nothing about another's vehicles.
+    let trained_on = model.metadata().get("param_set").map_or("", String::as_str);
+    if trained_on != sc.params.name() {
+        return Err(EpisodeError::Model {
+            path,
+            message: format!(
+                "param_set = {trained_on:?}, but scenario {} runs the {} parameter set",
+                sc.id,
+                sc.params.name()
+            ),
+        });
+    }
+    Ok(Box::new(model))
 }
 
 /// Run one episode drawing all randomness (sensing noise, actuator errors) from `rng`.

@@ -17,6 +17,7 @@ pub mod oracle;
 pub mod outcome;
 pub mod scenario;
 pub mod screen;
+mod unique_keys;
 pub mod vehicle;
 
 pub use episode::{

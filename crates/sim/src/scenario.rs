@@ -534,6 +534,21 @@ impl Scenario {
     /// [`ScenarioError::Syntax`] if the text is not JSON, [`ScenarioError::Field`] naming the
     /// field otherwise.
     pub fn from_json_line(text: &str, line: usize) -> Result<Self, ScenarioError> {
+        // A key named twice (JSON readers keep the last silently) is refused by name.
+        let mut keys = serde_json::Deserializer::from_str(text);
+        if let Err(e) =
+            serde_path_to_error::deserialize::<_, crate::unique_keys::UniqueKeys>(&mut keys)
+        {
+            let message = strip_position(&e.inner().to_string());
+            if message.starts_with(crate::unique_keys::DUPLICATE) {
+                return Err(ScenarioError::Field {
+                    line,
+                    field: field_of(&e.path().to_string(), &message),
+                    message: "named twice in its object (a scenario says each thing once)"
+                        .to_owned(),
+                });
+            }
+        }
         let value: serde_json::Value =
             serde_json::from_str(text).map_err(|e| ScenarioError::Syntax {
                 line,
@@ -671,6 +686,7 @@ impl Scenario {
             }
         }
         self.driver.check(line, hw)?;
+        self.check_obstacles_clear(line)?;
         range(line, "t_max", self.t_max, 1.0, 120.0)?;
         if !(self.eps_psi.is_finite()
             && self.eps_psi > 0.0
@@ -681,6 +697,38 @@ impl Scenario {
                 "eps_psi",
                 format!("{}: must lie in (0, π/2]", self.eps_psi),
             ));
+        }
+        Ok(())
+    }
+
+    /// No obstacle may overlap a vehicle at t = 0 (the episode would start in a collision,
+    /// with no heading error or margin to report).
+    fn check_obstacles_clear(&self, line: usize) -> Result<(), ScenarioError> {
+        if self.obstacles.is_empty() {
+            return Ok(());
+        }
+        let params = self.params.load()?;
+        let road = self.build_road()?;
+        for (name, v, p) in [
+            ("target", &self.target, &params.target),
+            ("bullet", &self.bullet, &params.bullet),
+        ] {
+            let w = v.to_world(&road);
+            let pose = dynamics::geometry::Pose2 {
+                p_in_world: dynamics::geometry::Vec2::new(w.x, w.y),
+                yaw: w.yaw,
+            };
+            let fp =
+                dynamics::geometry::Obb::vehicle_footprint(&pose, p.length, p.width, p.cg_to_front);
+            for (i, o) in self.obstacles.iter().enumerate() {
+                if dynamics::contact::obb_signed_distance(&fp, &o.body.footprint_at(0.0)) < 0.0 {
+                    return Err(ScenarioError::field(
+                        line,
+                        format!("obstacles[{i}].body"),
+                        format!("overlaps the {name} at t = 0"),
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -987,7 +1035,11 @@ fn strip_position(msg: &str) -> String {
 /// "missing field `x`" / "unknown field `x`" message (whose path is the parent object).
 fn field_of(path: &str, message: &str) -> String {
     let parent = if path == "." { "" } else { path };
-    for prefix in ["missing field `", "unknown field `"] {
+    for prefix in [
+        "missing field `",
+        "unknown field `",
+        crate::unique_keys::DUPLICATE,
+    ] {
         if let Some(rest) = message.strip_prefix(prefix) {
             if let Some(end) = rest.find('`') {
                 let name = &rest[..end];

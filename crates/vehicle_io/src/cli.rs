@@ -38,6 +38,21 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), Str
         .map_err(|e| format!("{}: {e}", path.display()))
 }
 
+/// Check, before the run, that `write_json` will be able to write `path`: not a folder, and
+/// its temporary file can be created beside it (it is removed again).
+///
+/// # Errors
+/// A message naming `option` and the file.
+pub fn check_writable(path: &Path, option: &str) -> Result<(), String> {
+    if path.is_dir() {
+        return Err(format!("{option} {}: is a folder", path.display()));
+    }
+    let tmp = path.with_extension("json.tmp");
+    std::fs::File::create(&tmp)
+        .and_then(|_| std::fs::remove_file(&tmp))
+        .map_err(|e| format!("{option} {}: cannot write: {e}", path.display()))
+}
+
 /// Print `message` to stderr and exit with status 2 (bad input or settings).
 pub fn fail(message: &str) -> ! {
     eprintln!("error: {message}");

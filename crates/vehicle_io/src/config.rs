@@ -67,6 +67,12 @@ pub struct ControllerIoSettings {
     pub deadline: f64,
     /// No vehicle heartbeat for this long (s, wall time): the peer is dead.
     pub peer_timeout: f64,
+    /// Wait this long (s, wall time) for the first word from the vehicle (a heartbeat or a
+    /// state); then give up and exit with `no_peer`.
+    pub connect_timeout: f64,
+    /// Nothing heard from the vehicle for this long (s, wall time) after it was heard:
+    /// give up and exit with `peer_lost` (a restarted vehicle has this long to come back).
+    pub peer_lost_timeout: f64,
     /// Delay compensation: the states are predicted forward by their age at the time of
     /// the command plus `actuation_delay` (s), at most `max_compensation` (s).
     pub compensate_delay: bool,
@@ -93,6 +99,8 @@ impl Default for ControllerIoSettings {
             stale_periods: 2.0,
             deadline: 0.045,
             peer_timeout: 0.5,
+            connect_timeout: 30.0,
+            peer_lost_timeout: 10.0,
             compensate_delay: true,
             actuation_delay: 0.0,
             max_compensation: 0.25,
@@ -126,6 +134,13 @@ impl ControllerIoSettings {
         in_range("stale_periods", self.stale_periods, 1.0, 100.0)?;
         in_range("deadline", self.deadline, 1e-4, 60.0)?;
         in_range("peer_timeout", self.peer_timeout, 1e-3, 600.0)?;
+        in_range("connect_timeout", self.connect_timeout, 0.0, 3600.0)?;
+        in_range(
+            "peer_lost_timeout",
+            self.peer_lost_timeout,
+            self.peer_timeout,
+            3600.0,
+        )?;
         in_range("actuation_delay", self.actuation_delay, 0.0, 1.0)?;
         in_range("max_compensation", self.max_compensation, 0.0, 1.0)?;
         in_range("fallback_brake", self.fallback_brake, 0.0, 1.0)?;
@@ -189,6 +204,11 @@ pub struct VehicleIoSettings {
     /// No valid command for this long (s, vehicle time): the vehicle's own safe stop
     /// (latched).
     pub command_timeout: f64,
+    /// A safe stop latched on the command timeout is released by this many consecutive
+    /// fresh commands: valid, in track or fallback mode, answering states published after
+    /// the latch (0: it stays latched until the run ends). A safe stop the controller asked
+    /// for is never released.
+    pub resume_after: u32,
     /// Wait this long (s, wall time) for the controller's first heartbeat before starting.
     pub connect_timeout: f64,
     /// Fraction of μ g of the vehicle's own safe stop.
@@ -211,6 +231,7 @@ impl Default for VehicleIoSettings {
             clock: VehicleClock::Wall,
             lockstep_timeout: 1.0,
             command_timeout: 0.15,
+            resume_after: 3,
             connect_timeout: 30.0,
             safe_stop_brake: 0.6,
             uncertainty: Uncertainty::default(),
@@ -240,6 +261,12 @@ impl VehicleIoSettings {
         in_range("period", self.period, 1e-3, 1.0)?;
         in_range("lockstep_timeout", self.lockstep_timeout, 1e-3, 600.0)?;
         in_range("command_timeout", self.command_timeout, self.period, 60.0)?;
+        if self.resume_after > 1000 {
+            return Err(invalid(
+                "resume_after",
+                format!("{}: must lie in [0, 1000] commands", self.resume_after),
+            ));
+        }
         in_range("connect_timeout", self.connect_timeout, 0.0, 3600.0)?;
         in_range("safe_stop_brake", self.safe_stop_brake, 0.0, 1.0)?;
         in_range("faults.drop_states", self.faults.drop_states, 0.0, 1.0)?;

@@ -18,13 +18,14 @@
 //! either side (and a recorder) may start first.
 
 use crate::msg::{ActuatorCommand, ControllerStatus, Heartbeat, StateEstimate};
-use iceoryx2::port::listener::Listener;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use std::fmt::Debug;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 /// The iceoryx2 service flavour: inter-process, shared memory.
@@ -134,10 +135,22 @@ pub fn node(name: &str) -> Result<Node<Svc>, PortError> {
         .map_err(|e| PortError::Node(format!("{e:?}")))
 }
 
-/// Whether SIGINT or SIGTERM has arrived (checked without blocking).
+/// Set once SIGINT or SIGTERM has been seen (iceoryx2 reports each signal once).
+static TERMINATION: AtomicBool = AtomicBool::new(false);
+
+/// Whether SIGINT or SIGTERM has arrived (checked without blocking). Once true, it stays
+/// true for the life of the process: iceoryx2's signal handler reports a signal to the first
+/// caller only, so a loop that checks in two places would otherwise miss it in the second.
 #[must_use]
 pub fn termination_requested(node: &Node<Svc>) -> bool {
-    node.wait(Duration::ZERO).is_err()
+    if TERMINATION.load(Ordering::Relaxed) {
+        return true;
+    }
+    let requested = node.wait(Duration::ZERO).is_err();
+    if requested {
+        TERMINATION.store(true, Ordering::Relaxed);
+    }
+    requested
 }
 
 /// Open (or create) a publish-subscribe service with the shared quality of service.
@@ -229,14 +242,31 @@ pub fn newest<T: Debug + Copy + ZeroCopySend + 'static>(
 
 /// Wait until `listener` fires or `timeout` passes; returns whether it fired.
 ///
+/// Two cases never block for good and never fail:
+///
+/// - a timeout under 1 µs: the listener's socket timeout has microsecond resolution and a
+///   zero socket timeout means "wait forever", so a remaining wait of a few hundred
+///   nanoseconds used to hang the loop. It is rounded up to whole microseconds, and a zero
+///   timeout only looks (no wait);
+/// - a signal that interrupts the wait (`EINTR`: SIGCONT after SIGSTOP, a scheduler's pause,
+///   SIGINT, SIGTERM) ends the wait early with `Ok(false)`. The caller checks
+///   [`termination_requested`] and carries on.
+///
 /// # Errors
-/// [`IoFault::Wait`].
+/// [`IoFault::Wait`] when the listener itself fails.
 pub fn wait_event(listener: &Listener<Svc>, timeout: Duration) -> Result<bool, IoFault> {
     let mut fired = false;
-    listener
-        .timed_wait(|_| fired = true, timeout)
-        .map_err(|_| IoFault::Wait)?;
-    Ok(fired)
+    let micros = timeout.as_nanos().div_ceil(1_000);
+    let result = if micros == 0 {
+        listener.try_wait(|_| fired = true)
+    } else {
+        let micros = u64::try_from(micros).unwrap_or(u64::MAX);
+        listener.timed_wait(|_| fired = true, Duration::from_micros(micros))
+    };
+    match result {
+        Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(fired),
+        Err(_) => Err(IoFault::Wait),
+    }
 }
 
 /// The controller's ports.

@@ -63,12 +63,28 @@ pub enum Ending {
     Finished,
     /// SIGINT or SIGTERM.
     Interrupted,
-    /// The peer never showed up.
+    /// The peer never showed up within `connect_timeout`.
     NoPeer,
+    /// The peer was heard, then nothing came from it for `peer_lost_timeout` (controller).
+    PeerLost,
     /// The time limit passed.
     TimeLimit,
     /// The transport failed.
     Transport,
+}
+
+impl Ending {
+    /// Whether the process could not do its job: the binaries exit with status 1 then.
+    #[must_use]
+    pub fn is_failure(self) -> bool {
+        matches!(self, Self::NoPeer | Self::PeerLost | Self::Transport)
+    }
+
+    /// The exit status of a process that ended so: 0, or 1 for a failure.
+    #[must_use]
+    pub fn exit_code(self) -> i32 {
+        i32::from(self.is_failure())
+    }
 }
 
 /// What the controller did.
@@ -78,6 +94,8 @@ pub struct ControllerSummary {
     #[serde(flatten)]
     pub counters: Counters,
     pub states_received: u64,
+    /// New vehicle processes met mid-run (their state sequence started again).
+    pub vehicle_restarts: u64,
     /// Control-step time, planning included (ms), over the solving cycles.
     pub cycle_ms: Stats,
     /// Planning time of the cycles that replanned (ms).
@@ -108,8 +126,16 @@ fn beat(
 /// The controller's loop: wake on each vehicle event, answer every new state with a
 /// command and a status, fall back when the state goes stale or the peer dies.
 ///
+/// Ends when the vehicle reports the run finished, on SIGINT/SIGTERM, when the vehicle is
+/// not heard within `connect_timeout` of the start ([`Ending::NoPeer`]) or for
+/// `peer_lost_timeout` after it was heard ([`Ending::PeerLost`]), or when the transport
+/// fails. A signal that only interrupts a wait (SIGSTOP/SIGCONT) does not end it. A state
+/// whose sequence number goes back comes from a new vehicle process: the controller starts
+/// over.
+///
 /// Memory: `max_cycles` samples of cycle and planning times, preallocated; the loop
 /// allocates nothing else (the ports are iceoryx2 shared memory).
+#[allow(clippy::too_many_lines)]
 pub fn run_controller(
     lp: &mut ControlLoop,
     ports: &ControllerPorts,
@@ -118,6 +144,8 @@ pub fn run_controller(
     let s = lp.settings().clone();
     let period = Duration::from_secs_f64(s.period);
     let peer_timeout_ns = secs_to_ns(s.peer_timeout);
+    let connect_ns = secs_to_ns(s.connect_timeout);
+    let lost_ns = secs_to_ns(s.peer_lost_timeout);
     let stale_ns = s.stale_ns();
     let mut cycle_ms = Vec::with_capacity(max_cycles);
     let mut plan_ms = Vec::with_capacity(max_cycles);
@@ -127,7 +155,11 @@ pub fn run_controller(
     // The newest (vehicle clock, wall clock) pair heard from the vehicle.
     let mut reference: Option<(u64, u64)> = None;
     let mut last_hb_wall: Option<u64> = None;
+    // When anything (a state or a heartbeat) last came from the vehicle.
+    let mut heard_wall: Option<u64> = None;
+    let start_wall = monotonic_ns();
     let mut states_received = 0u64;
+    let mut vehicle_restarts = 0u64;
     let ending = loop {
         if beat(&ports.heartbeat, &mut hb, 0).is_err() {
             break Ending::Transport;
@@ -142,32 +174,40 @@ pub fn run_controller(
         }
         let wall = monotonic_ns();
         let mut new_state = false;
-        loop {
-            match ports.state.receive() {
-                Ok(Some(sample)) => {
-                    let st = *sample.payload();
-                    states_received += 1;
-                    if latest.is_none_or(|l| st.seq > l.seq) {
-                        if st.flags & STATE_RESTARTED != 0 {
-                            lp.reset();
-                        }
-                        latest = Some(st);
-                        latest_wall = wall;
-                        new_state = true;
-                        if reference.is_none_or(|(v, _)| st.sent_ns >= v) {
-                            reference = Some((st.sent_ns, st.wall_sent_ns));
-                        }
-                    }
+        while let Ok(Some(sample)) = ports.state.receive() {
+            let st = *sample.payload();
+            states_received += 1;
+            heard_wall = Some(wall);
+            if latest.is_some_and(|l| st.seq < l.seq) {
+                // A new vehicle process (its states count from 0 again): start over.
+                vehicle_restarts += 1;
+                lp.reset();
+                latest = None;
+                reference = None;
+            }
+            if latest.is_none_or(|l| st.seq > l.seq) {
+                if st.flags & STATE_RESTARTED != 0 {
+                    lp.reset();
                 }
-                Ok(None) => break,
-                Err(_) => break,
+                latest = Some(st);
+                latest_wall = wall;
+                new_state = true;
+                if reference.is_none_or(|(v, _)| st.sent_ns >= v) {
+                    reference = Some((st.sent_ns, st.wall_sent_ns));
+                }
             }
         }
         if let Ok(Some(h)) = newest(&ports.vehicle_heartbeat) {
             last_hb_wall = Some(wall);
+            heard_wall = Some(wall);
             if reference.is_none_or(|(v, _)| h.vehicle_ns >= v) {
                 reference = Some((h.vehicle_ns, h.wall_sent_ns));
             }
+        }
+        match heard_wall {
+            None if wall.saturating_sub(start_wall) > connect_ns => break Ending::NoPeer,
+            Some(t) if wall.saturating_sub(t) > lost_ns => break Ending::PeerLost,
+            _ => {}
         }
         // Nothing to answer before the first state (a command now would be stale or a
         // safe-stop request by the time the vehicle's clock starts).
@@ -219,6 +259,7 @@ pub fn run_controller(
         ending,
         counters: lp.counters(),
         states_received,
+        vehicle_restarts,
         cycle_ms: Stats::of(&mut cycle_ms),
         plan_ms: Stats::of(&mut plan_ms),
         peak_rss_kib: peak,
@@ -236,6 +277,8 @@ pub struct SafeStopReport {
     pub stopped_at: Option<f64>,
     /// Bullet speed at the latch (m/s).
     pub speed_at_latch: f64,
+    /// Vehicle time the latch was released by fresh commands, if it was (s).
+    pub resumed_at: Option<f64>,
 }
 
 /// What the vehicle side did.
@@ -254,7 +297,15 @@ pub struct VehicleSummary {
     pub lockstep_misses: u64,
     /// Soak: scenario restarts.
     pub restarts: u64,
+    /// The most recent safe stop (none if it never latched).
     pub safe_stop: Option<SafeStopReport>,
+    /// Safe stops latched, and how many a controller that came back released.
+    pub safe_stops: u64,
+    pub resumes: u64,
+    /// The largest delay of a command-timeout latch past its deadline (ms, vehicle clock).
+    pub safe_stop_late_max_ms: f64,
+    /// Command sequence numbers that went back: new controller processes.
+    pub controller_restarts: u64,
     pub final_bullet_speed: f64,
     /// IPC latency of a control cycle excluding the controller's own time: state publish →
     /// command receive, minus (command send − state receive) (µs).
@@ -277,6 +328,8 @@ struct Latencies {
 }
 
 const SENT_RING: usize = 256;
+/// The most cycles whose latencies the vehicle keeps (4 × 8 MiB, preallocated).
+pub const MAX_LATENCY_SAMPLES: usize = 1 << 20;
 
 impl Latencies {
     fn new(n: usize) -> Self {
@@ -318,9 +371,15 @@ impl Latencies {
 }
 
 /// The vehicle side's loop: publish the state every period, apply the newest valid
-/// command, stop safely when commands stop; ends when the bridge says the run is over (and
-/// a latched safe stop has brought the bullet to rest), on SIGINT/SIGTERM, or at
-/// `max_time` seconds of vehicle time.
+/// command, stop safely when commands stop and hand back to a controller that returns
+/// ([`CommandGate`]); ends when the bridge says the run is over (and a latched safe stop
+/// has brought the bullet to rest), at `max_time` seconds of vehicle time (both publish a
+/// last state flagged finished, so the controller ends too), on SIGINT/SIGTERM, or when no
+/// controller shows up within `connect_timeout` ([`Ending::NoPeer`]).
+///
+/// On the wall clock the plant keeps to the wall clock: after a pause of this process it
+/// catches up (as a real vehicle's time would have passed), and the command timeout is
+/// judged at every 5 ms sub-tick of that catch-up.
 pub fn run_vehicle<B: VehicleBridge>(
     s: &VehicleIoSettings,
     bridge: &mut B,
@@ -332,7 +391,8 @@ pub fn run_vehicle<B: VehicleBridge>(
     let steps_per = (period_ns / step_ns).max(1) as usize;
     // Real time: apply commands on arrival, at the next 5 ms sub-tick.
     let sub_steps = ((5_000_000 / step_ns).max(1) as usize).min(steps_per);
-    let max_periods = (max_time / s.period).ceil() as usize + 2;
+    // Latency samples of at most `MAX_LATENCY_SAMPLES` cycles (a long soak keeps the first).
+    let max_periods = ((max_time / s.period).ceil() as usize + 2).min(MAX_LATENCY_SAMPLES);
     let mut lat = Latencies::new(max_periods);
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed ^ 0x5eed_fa17);
     let mut hb = heartbeat(PEER_VEHICLE);
@@ -348,6 +408,10 @@ pub fn run_vehicle<B: VehicleBridge>(
         lockstep_misses: 0,
         restarts: 0,
         safe_stop: None,
+        safe_stops: 0,
+        resumes: 0,
+        safe_stop_late_max_ms: 0.0,
+        controller_restarts: 0,
         final_bullet_speed: 0.0,
         ipc_us: Stats::of(&mut []),
         state_transit_us: Stats::of(&mut []),
@@ -377,9 +441,14 @@ pub fn run_vehicle<B: VehicleBridge>(
         return summary;
     }
 
-    let mut gate = CommandGate::new(secs_to_ns(s.command_timeout), bridge.now_ns());
+    let mut gate = CommandGate::new(
+        secs_to_ns(s.command_timeout),
+        s.resume_after,
+        bridge.now_ns(),
+    );
+    // The latch the summary's `safe_stop` describes, as (reason, vehicle ns).
+    let mut report_latch: Option<(SafeStopReason, u64)> = None;
     let mut stopped_at: Option<f64> = None;
-    let mut latch_speed = 0.0;
     let wall0 = monotonic_ns();
     let mut seq = 0u64;
     let stall = (
@@ -387,7 +456,11 @@ pub fn run_vehicle<B: VehicleBridge>(
         secs_to_ns(s.faults.stall_at + s.faults.stall_for),
     );
     let mut finished = false;
+    let mut time_up = false;
     let mut restarted = false;
+    // Lock step: whether the controller answered lately (while latched, the vehicle waits
+    // for answers only from a controller that is answering).
+    let mut answering = true;
     summary.restarts = 0;
     summary.ending = loop {
         let now = bridge.now_ns();
@@ -415,19 +488,24 @@ pub fn run_vehicle<B: VehicleBridge>(
             if publish(&ports.state, st).is_err() {
                 break Ending::Transport;
             }
+            gate.published(seq);
             summary.states_published += 1;
         }
         let _ = beat(&ports.heartbeat, &mut hb, now);
         let _ = ports.state_ready.notify();
         if finished {
-            break Ending::Finished;
+            break if time_up {
+                Ending::TimeLimit
+            } else {
+                Ending::Finished
+            };
         }
 
         match s.clock {
             VehicleClock::Simulated => {
                 // Wait for the answer to this state; after a dropped state, for whatever the
                 // controller says (it speaks when the newest state it has goes stale).
-                let waiting = gate.latched().is_none();
+                let waiting = gate.latched().is_none() || answering;
                 let deadline = monotonic_ns() + secs_to_ns(s.lockstep_timeout);
                 let (mut answered, mut any) = drain(ports, bridge, &mut gate, &mut lat, seq);
                 while waiting && !(answered || (dropped && any)) {
@@ -443,6 +521,7 @@ pub fn run_vehicle<B: VehicleBridge>(
                     answered |= a;
                     any |= n;
                 }
+                answering = answered || any;
                 if waiting && !dropped && !answered {
                     summary.lockstep_misses += 1;
                 }
@@ -457,7 +536,7 @@ pub fn run_vehicle<B: VehicleBridge>(
                     loop {
                         let _ = drain(ports, bridge, &mut gate, &mut lat, seq);
                         let w = monotonic_ns();
-                        if w >= tick_end {
+                        if w >= tick_end || termination_requested(&ports.node) {
                             break;
                         }
                         let _ =
@@ -474,45 +553,77 @@ pub fn run_vehicle<B: VehicleBridge>(
         summary.periods += 1;
         if s.soak_periods >= 10 && summary.periods % (s.soak_periods / 10) == 0 {
             eprintln!(
-                "pit-vehicle: soak {} / {} periods ({} runs), {} lock-step misses",
+                "pit-vehicle: soak {} / {} periods ({} runs), {} lock-step misses, {} safe stops ({} resumed)",
                 summary.periods,
                 s.soak_periods,
                 summary.restarts + 1,
-                summary.lockstep_misses
+                summary.lockstep_misses,
+                gate.latches,
+                gate.resumes
             );
         }
         let t = bridge.now_ns() as f64 * 1e-9;
-        if gate.latched().is_some() {
-            if summary.safe_stop.is_none() {
-                latch_speed = bridge.bullet_speed();
+        match (gate.latched(), report_latch) {
+            // A new latch (also one that followed a resume within this period).
+            (Some(l), prev) if prev.is_none_or(|p| p.0 == l.0 && p.1 != l.1) => {
+                summary.safe_stop = Some(SafeStopReport {
+                    reason: l.0,
+                    at: l.1 as f64 * 1e-9,
+                    stopped_at: None,
+                    speed_at_latch: bridge.bullet_speed(),
+                    resumed_at: None,
+                });
+                stopped_at = None;
+                report_latch = Some(l);
             }
-            if stopped_at.is_none() && bridge.bullet_speed() < 0.1 {
-                stopped_at = Some(t);
+            // The controller asked for the stop while the vehicle already stopped itself.
+            (Some(l), Some(p)) if p != l => {
+                if let Some(r) = summary.safe_stop.as_mut() {
+                    r.reason = l.0;
+                }
+                report_latch = Some(l);
             }
-            summary.safe_stop = gate.latched().map(|(reason, at)| SafeStopReport {
-                reason,
-                at: at as f64 * 1e-9,
-                stopped_at,
-                speed_at_latch: latch_speed,
-            });
+            (None, Some(_)) => {
+                if let Some(r) = summary.safe_stop.as_mut() {
+                    r.resumed_at = Some(t);
+                }
+                report_latch = None;
+                stopped_at = None;
+            }
+            _ => {}
+        }
+        if gate.latched().is_some() && stopped_at.is_none() && bridge.bullet_speed() < 0.1 {
+            stopped_at = Some(t);
+            if let Some(r) = summary.safe_stop.as_mut() {
+                r.stopped_at = stopped_at;
+            }
         }
         if termination_requested(&ports.node) {
             break Ending::Interrupted;
         }
         // Over when judged, but a vehicle stopping itself comes to rest first.
         if over && (gate.latched().is_none() || stopped_at.is_some()) {
-            if summary.periods < s.soak_periods && gate.latched().is_none() && bridge.restart() {
+            if summary.periods < s.soak_periods && bridge.restart() {
                 summary.restarts += 1;
                 restarted = true;
+                gate.restart(bridge.now_ns());
+                report_latch = None;
+                stopped_at = None;
                 continue;
             }
             finished = true;
             continue;
         }
         if t >= max_time {
-            break Ending::TimeLimit;
+            // The last state says so: the controller ends with the run.
+            time_up = true;
+            finished = true;
         }
     };
+    summary.safe_stops = gate.latches;
+    summary.resumes = gate.resumes;
+    summary.safe_stop_late_max_ms = gate.latch_late_max_ns as f64 * 1e-6;
+    summary.controller_restarts = gate.controller_restarts;
     summary.time = bridge.now_ns() as f64 * 1e-9;
     summary.commands_received = gate.received;
     summary.commands_applied = gate.applied;

@@ -9,27 +9,19 @@
 //!
 //! The binaries are the test profile's (debug): wall-clock deadlines are lifted.
 
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+mod common;
+
+use common::{count_messages, json, root, wait, HALF, TRIALS};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("picopit-ipc-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn out_dir(name: &str) -> std::path::PathBuf {
+    common::out_dir("ipc", name)
 }
 
 fn prefix(name: &str) -> String {
-    format!("picopit-test-ipc-{}-{name}", std::process::id())
+    common::prefix("ipc", name)
 }
-
-const TRIALS: &str = "data/trials/half_scale.jsonl";
-const HALF: &str = "configs/controller_half_scale.toml";
 
 fn vehicle(id: &str, prefix: &str, extra: &[&str]) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_pit-vehicle"));
@@ -50,25 +42,6 @@ fn controller(id: &str, prefix: &str, extra: &[&str]) -> Command {
         .args(extra)
         .stdout(Stdio::null());
     c
-}
-
-fn wait(child: &mut Child, limit: Duration, what: &str) -> std::process::ExitStatus {
-    let t0 = Instant::now();
-    loop {
-        if let Some(st) = child.try_wait().unwrap() {
-            return st;
-        }
-        if t0.elapsed() > limit {
-            let _ = child.kill();
-            panic!("{what} did not finish within {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&text).unwrap()
 }
 
 /// Run both processes to the end; the vehicle's and the controller's summaries.
@@ -193,37 +166,6 @@ fn killing_the_controller_makes_the_vehicle_stop_itself_and_the_recording_reads_
     assert!(clean, "the vehicle's recording is finished");
 }
 
-/// Messages on `topic` in an MCAP file read as a stream, and whether the stream ended
-/// cleanly (a footer) rather than at a truncation. Every message must decode as JSON.
-fn count_messages(path: &Path, topic: &str) -> (usize, bool) {
-    let Ok(bytes) = std::fs::read(path) else {
-        return (0, false);
-    };
-    let mut n = 0;
-    let mut clean = true;
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        match m {
-            Ok(m) => {
-                let _: serde_json::Value = serde_json::from_slice(&m.data).unwrap_or_else(|e| {
-                    panic!(
-                        "{}: message on {} is not JSON: {e}",
-                        path.display(),
-                        m.channel.topic
-                    )
-                });
-                if m.channel.topic == topic {
-                    n += 1;
-                }
-            }
-            Err(_) => {
-                clean = false;
-                break;
-            }
-        }
-    }
-    (n, clean)
-}
-
 #[test]
 fn a_stall_of_the_states_makes_the_controller_fall_back_and_dropped_states_are_survived() {
     let (v, c) = run_pair(
@@ -273,6 +215,17 @@ fn bad_input_is_refused_with_its_name() {
     std::fs::write(&cfg, "perod = 0.05\n").unwrap();
     let err = refused(env!("CARGO_BIN_EXE_pit-controller"), &config);
     assert!(err.contains("perod"), "{err}");
+
+    // A summary that could not be written is refused before the run, not after it.
+    for bin in [
+        env!("CARGO_BIN_EXE_pit-vehicle"),
+        env!("CARGO_BIN_EXE_pit-controller"),
+    ] {
+        for path in ["/proc/picopit-x/s.json", "/tmp"] {
+            let err = refused(bin, &["--id", "R1", "--summary", path]);
+            assert!(err.contains("--summary") && err.contains(path), "{err}");
+        }
+    }
 }
 
 /// Run `bin` on the trial scenarios with `args`: it must exit with status 2; its stderr.

@@ -40,6 +40,7 @@ from typing import Any, Dict, Iterable, Iterator, List, Mapping, Optional, Seque
 import numpy as np
 
 from . import _core, funnel, provenance
+from .bench_checks import check_ray, finite_or_none
 
 SUBSET_SIZE = 128
 CATEGORIES = ("straight_urban", "straight_highway", "curved")
@@ -225,6 +226,7 @@ def _run_ray(tasks: Sequence[Task], address: str, workers: int) -> Iterator[Dict
         raise BenchError("--ray-address: ray is not installed (pip install 'picopit[ray]')") from None
     started = False
     if not ray.is_initialized():
+        check_ray(address)
         if address == "local":
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
         else:
@@ -284,7 +286,7 @@ def _pooled(arrays: Iterable[np.ndarray], q: float) -> Optional[float]:
     arrs = [np.asarray(a, dtype=float) for a in arrays if a is not None and len(a)]
     if not arrs:
         return None
-    return float(np.percentile(np.concatenate(arrs), q))
+    return _finite(np.percentile(np.concatenate(arrs), q))
 
 
 def summarise(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str, Any]],
@@ -460,7 +462,7 @@ def episode_table(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[
         d = {k: r.get(k) for k in EPISODE_FIELDS}
         d.update(scenario=m["id"], category=m["category"], road=m["road"], adhesion=m["adhesion"],
                  params=m["params"], mu=m["mu"], target_speed=m.get("target_speed"))
-        out.append(d)
+        out.append(finite_or_none(d))
     return out
 
 

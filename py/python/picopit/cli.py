@@ -1,7 +1,10 @@
 """The ``picopit`` command line. Subcommands grow with the project.
 
-Bad input (a setting out of range, an unknown parameter set, a malformed file) prints one
-line naming the field and exits with status 2, without a traceback.
+Bad input (a setting out of range, an unknown parameter set, a malformed file, an output path
+that cannot be written) prints one line naming the field and exits with status 2, without a
+traceback; output paths are checked before the work starts. Work that could not be completed
+(episodes or trial runs that errored, a write that failed on the way) prints one line and
+exits with status 1.
 """
 
 from __future__ import annotations
@@ -13,7 +16,11 @@ import sys
 from pathlib import Path
 from typing import Any, Dict, List, NoReturn, Optional, Tuple
 
+from .outputs import OutputError, check_dir, check_file
+
 EXIT_BAD_INPUT = 2
+#: The work could not be completed (errored episodes or runs, a failed write).
+EXIT_FAILED = 1
 
 
 class _Parser(argparse.ArgumentParser):
@@ -253,7 +260,8 @@ def _bench_parser(sub) -> None:
     p.add_argument("--json", metavar="PATH", help="also write the summary JSON here")
     p.add_argument("--workers", type=int, default=0, metavar="W", help="worker processes (default 0: all cores)")
     p.add_argument("--ray-address", metavar="ADDR",
-                   help="run the episodes on a Ray cluster: an address for ray.init, or 'local' to start one here")
+                   help="run the episodes on a Ray cluster: an address for ray.init (HOST:PORT, ray://HOST:PORT), "
+                        "or 'local' to start one here; a head that does not answer within 10 s is an error")
     p.add_argument("--no-figures", action="store_true", help="skip the figures, the case re-runs and the MCAP")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_bench)
@@ -270,7 +278,8 @@ def _replay_parser(sub) -> None:
         ),
     )
     p.add_argument("file", metavar="FILE.mcap", help="the recording")
-    p.add_argument("--out", metavar="PATH", help="PNG to write (default FILE.png)")
+    p.add_argument("--out", metavar="PATH", help="PNG to write, or a folder to write FILE's name .png into "
+                                                 "(default FILE.png beside FILE)")
     p.set_defaults(func=_cmd_replay)
 
 
@@ -315,9 +324,11 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from .replay import replay
+    from .replay import check_source, figure_path, replay
 
-    _, png, summary = replay(args.file, args.out)
+    check_source(args.file)
+    png = check_file(figure_path(args.file, args.out), "--out" if args.out else "the figure (FILE.png)")
+    _, png, summary = replay(args.file, png)
     print(summary)
     print(f"replay: wrote {png}")
     return 0
@@ -371,7 +382,11 @@ def _cmd_trials(args: argparse.Namespace) -> int:
     for r in errors:
         print(f"trials: note: {r['case']} {r['kind']} seed {r['seed']}: {r['error']} (logs in {paths['md'].parent / r['dir']})")
     print("trials: wrote " + ", ".join(str(p) for p in paths.values()))
-    return 1 if rows and len(errors) == len(rows) else 0
+    if errors:
+        print(f"trials: error: {len(errors)} of {len(rows)} runs did not complete (cause 'error'); "
+              "see the notes above", file=sys.stderr)
+        return 1
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -442,6 +457,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("runs") / (
         "simulate-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     )
+    check_dir(out, "--out")
     result = run(cfg, progress=not args.no_progress)
     paths = write_outputs(result, out)
     s = result.summary
@@ -470,6 +486,7 @@ def _cmd_datagen(args: argparse.Namespace) -> int:
     _check_params_name(args.params)
     cfg = datagen.DatagenConfig.for_params(args.params, episodes=args.episodes, seed=args.seed,
                                            sustained=args.sustained)
+    check_dir(args.out, "--out")
     arrays, manifest = datagen.generate(cfg, progress=not args.no_progress)
     manifest["command"] = _command_line(_ARGV)
     manifest["created"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
@@ -516,9 +533,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
         base=args.base,
     ).validate()
     ds = datagen.load(Path(args.data))
-    out = Path(args.out)
+    out = check_dir(args.out, "--out")
+    path = check_file(Path(args.model) if args.model else out / "pinn.safetensors", "--model")
     model, info = train_teacher(ds, cfg, out, progress=not args.no_progress)
-    path = Path(args.model) if args.model else out / "pinn.safetensors"
     save_model(model, path, kind="pinn", param_set=ds.param_set, mu_range=_mu_range(ds),
                provenance=_provenance(ds, cfg.seed, info["config"]))
     v = info["val"]
@@ -564,9 +581,9 @@ def _cmd_compress(args: argparse.Namespace) -> int:
         from .datagen import DatasetError
 
         raise DatasetError(f"dt: teacher {args.teacher} steps {teacher.dt} s, data {ds.manifest['dt']} s")
-    out = Path(args.out)
+    out = check_dir(args.out, "--out")
+    path = check_file(Path(args.model) if args.model else out / "picopinn.safetensors", "--model")
     pico, info = compress(teacher, ds, cfg, out, progress=not args.no_progress)
-    path = Path(args.model) if args.model else out / "picopinn.safetensors"
     config = dict(info["config"], teacher=str(args.teacher), teacher_data_hash=meta.get("data_hash", ""),
                   threshold=info["clustering"]["threshold"])
     save_model(pico, path, kind="picopinn", param_set=ds.param_set, mu_range=_mu_range(ds),
@@ -590,6 +607,10 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
         raise DatasetError(f"horizon = {args.horizon}, stride = {args.stride}: must be positive integers")
     ds = datagen.load(Path(args.data))
+    if args.out:
+        check_dir(args.out, "--out")
+    if args.json:
+        check_file(args.json, "--json")
     res = ev.run(ds, Path(args.pinn), Path(args.picopinn), horizon=args.horizon, stride=args.stride,
                  progress=not args.no_progress)
     res["command"] = _command_line(_ARGV)
@@ -621,7 +642,9 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     from .surrogate_nn import git_commit
 
     priors_path = Path(args.priors)
+    check_dir(args.out, "--out")
     if args.write_priors:
+        check_file(priors_path, "--priors")
         n = sc.write_priors(priors_path)
         print(f"scenarios: wrote {n} priors to {priors_path}")
     priors = sc.load_priors(priors_path)
@@ -654,6 +677,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         target_gear=args.target_gear,
     ).validate()
     out = Path(args.out) if args.out else Path("runs") / ("bench-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S"))
+    check_dir(out, "--out")
+    if args.json:
+        check_file(args.json, "--json")
+    from .bench_checks import check_models, check_ray
+
+    check_ray(cfg.ray_address)
+    check_models(cfg)
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     # The source tree's commit when the run starts (the extension is whatever was last built).
     extra = {"command": _command_line(_ARGV), "created": started, "git_commit": bench.git_commit()}
@@ -667,6 +697,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     print(f"bench: {len(res.scenes)} scenes x {len(cfg.configs)} configurations in {res.seconds:.0f} s "
           f"on {cfg.n_workers()} workers (seed {cfg.seed})")
     print("bench: wrote " + ", ".join(str(p) for p in paths.values()) + (f", {args.json}" if args.json else ""))
+    errors = [r for r in res.rows if r.get("error")]
+    if errors:
+        first = errors[0]
+        print(f"bench: error: {len(errors)} of {len(res.rows)} episodes could not be run (cause 'error', "
+              f"counted as failures in the tables); first: {res.meta[first['index']]['id']} / {first['config']}: "
+              f"{first['error']}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -678,7 +715,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     _ARGV = argv
     parser = build_parser()
     args = parser.parse_args(argv)
-    bad_input: tuple = (ConfigError, ParamError)
+    bad_input: tuple = (ConfigError, ParamError, OutputError)
     if args.command in ("datagen", "train", "compress", "eval-surrogates"):
         from .datagen import DatasetError
         from .surrogate_nn import ModelFileError
@@ -706,6 +743,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     except KeyboardInterrupt:
         print("picopit: interrupted", file=sys.stderr)
         return 130
+    except (OSError, MemoryError) as e:
+        # A write that failed after the checks (a full disk, a vanished folder): one line.
+        what = f"{e.filename}: {e.strerror}" if isinstance(e, OSError) and e.filename and e.strerror else str(e)
+        print(f"picopit: error: {what or type(e).__name__}", file=sys.stderr)
+        return EXIT_FAILED
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -40,6 +40,12 @@ The recordings come from ``crates/vehicle_io/src/record.rs`` (one file per proce
 The plots use the vehicle clock (``stamp_ns``) so states, commands and statuses line up. A file
 whose process was killed lacks its summary and footer and may end inside a record: it is read
 with the stream reader up to its last complete record.
+
+Every message on ``/state``, ``/command`` and ``/status`` is checked before it is drawn
+(``FIELDS``): a missing field, a value of the wrong type or an absurd one (a stamp that is not
+a non-negative integer, a number beyond ``ABSURD`` in size, an array of the wrong length) is a
+:class:`ReplayError` naming the topic, the message and the field. ``null`` (a value that was
+not finite when recorded) is allowed in the number fields and is drawn as a gap.
 """
 
 from __future__ import annotations
@@ -47,6 +53,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
 import struct
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
@@ -63,6 +70,19 @@ PHASES = {0: "chasing", 1: "pit", 2: "stabilising", 3: "done", 4: "aborted"}
 FAULTS = {1 << 0: "stale state", 1 << 1: "deadline missed", 1 << 2: "solver failure",
           1 << 3: "peer dead", 1 << 4: "no state", 1 << 5: "bad state"}
 DEFAULT_BOX = (4.8, 1.85, 1.45)
+#: Numbers beyond this size (m, rad, N m) are refused as absurd.
+ABSURD = 1e9
+_U32 = 2 ** 32
+_STAMP_MAX = 2 ** 63
+
+#: The fields replay reads, per topic: "stamp" (an integer in [0, 2^63) ns), "u32", "num" (a
+#: number or null, |x| <= ABSURD) or ("vec", n) (n such numbers).
+FIELDS: Dict[str, Dict[str, Any]] = {
+    "/state": {"stamp_ns": "stamp", "bullet": ("vec", 6), "target": ("vec", 8), "flags": "u32"},
+    "/command": {"stamp_ns": "stamp", "steer": "num", "torque": "num", "mode": "u32"},
+    "/status": {"stamp_ns": "stamp", "phase": "u32", "faults": "u32", "fallbacks": "u32",
+                "deadline_misses": "u32", "stale_states": "u32"},
+}
 
 
 class ReplayError(Exception):
@@ -92,18 +112,79 @@ class Recording:
         return {t: len(v) for t, v in self.messages.items()}
 
     def box(self, who: str) -> Tuple[float, float, float]:
+        """The vehicle's length, width, height from the metadata (a default when missing or
+        not a size between 1 cm and 100 m)."""
         try:
-            return tuple(float(self.metadata[f"{who}.{k}"]) for k in ("length", "width", "height"))  # type: ignore[return-value]
-        except (KeyError, ValueError):
+            box = tuple(float(self.metadata[f"{who}.{k}"]) for k in ("length", "width", "height"))
+        except (KeyError, ValueError, TypeError):
             return DEFAULT_BOX
+        ok = all(0.01 <= v <= 100.0 for v in box)
+        return box if ok else DEFAULT_BOX  # type: ignore[return-value]
 
     def road(self) -> List[List[Tuple[float, float]]]:
-        """The road's polylines from the first ``road`` entity on /scene (empty without one)."""
+        """The road's polylines from the first ``road`` entity on /scene (empty without one;
+        points that are not finite numbers are left out)."""
         for _, _, msg in self.messages.get("/scene", []):
-            for e in msg.get("entities", []) if isinstance(msg, dict) else []:
-                if e.get("id") == "road":
-                    return [[(p["x"], p["y"]) for p in line.get("points", [])] for line in e.get("lines", [])]
+            ents = msg.get("entities", []) if isinstance(msg, dict) else []
+            for e in ents if isinstance(ents, list) else []:
+                if isinstance(e, dict) and e.get("id") == "road":
+                    lines = e.get("lines", [])
+                    return [[(p["x"], p["y"]) for p in line.get("points", []) if _point(p)]
+                            for line in (lines if isinstance(lines, list) else [])
+                            if isinstance(line, dict) and isinstance(line.get("points", []), list)]
         return []
+
+
+def _number(v: Any) -> bool:
+    """A JSON number (not a bool) that is finite and not absurd."""
+    return (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            and abs(v) <= ABSURD)
+
+
+def _point(p: Any) -> bool:
+    return isinstance(p, dict) and _number(p.get("x")) and _number(p.get("y"))
+
+
+def _problem(v: Any, kind: Any) -> Optional[str]:
+    """What is wrong with value ``v`` of kind ``kind`` (``FIELDS``), or None."""
+    if kind == "stamp":
+        if not isinstance(v, int) or isinstance(v, bool):
+            return f"= {v!r}: not an integer number of nanoseconds"
+        return None if 0 <= v < _STAMP_MAX else f"= {v}: outside [0, 2^63) ns"
+    if kind == "u32":
+        if not isinstance(v, int) or isinstance(v, bool):
+            return f"= {v!r}: not an integer"
+        return None if 0 <= v < _U32 else f"= {v}: outside [0, 2^32)"
+    if kind == "num":
+        if v is None or _number(v):
+            return None
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            return f"= {v!r}: not finite or larger than {ABSURD:g} in size"
+        return f"= {v!r}: not a number"
+    _, n = kind
+    if not isinstance(v, list) or len(v) != n:
+        return f"= {str(v)[:60]}: not an array of {n} numbers"
+    for j, x in enumerate(v):
+        why = _problem(x, "num")
+        if why:
+            return f"[{j}] {why}"
+    return None
+
+
+def check_messages(rec: Recording) -> None:
+    """Check every message replay reads (``FIELDS``); raises :class:`ReplayError` naming the
+    file, the topic, the message (1-based, in file order) and the field."""
+    for topic, fields in FIELDS.items():
+        for i, (_, _, msg) in enumerate(rec.messages.get(topic, [])):
+            where = f"{rec.path}: {topic} message {i + 1}"
+            if not isinstance(msg, dict):
+                raise ReplayError(f"{where}: not a JSON object")
+            for name, kind in fields.items():
+                if name not in msg:
+                    raise ReplayError(f"{where}: field `{name}` is missing")
+                why = _problem(msg[name], kind)
+                if why:
+                    raise ReplayError(f"{where}: field `{name}`{why if why.startswith('[') else ' ' + why}")
 
 
 def _complete_prefix(data: bytes) -> Tuple[int, bool]:
@@ -121,6 +202,15 @@ def _complete_prefix(data: bytes) -> Tuple[int, bool]:
     return off, False
 
 
+def check_source(path: "str | Path") -> Path:
+    """``path`` as a Path; raises :class:`ReplayError` when it exists but is not a regular file
+    (a folder, or a device such as ``/dev/zero`` that would be read until memory runs out)."""
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise ReplayError(f"{path}: not a regular file")
+    return path
+
+
 def read_recording(path: "str | Path") -> Recording:
     """Read every message of ``path`` with the MCAP stream reader (also a truncated file).
 
@@ -130,13 +220,15 @@ def read_recording(path: "str | Path") -> Recording:
     from mcap.records import Channel, Message, Metadata, Schema
     from mcap.stream_reader import StreamReader
 
-    path = Path(path)
+    path = check_source(path)
     try:
         data = path.read_bytes()
     except FileNotFoundError:
         raise ReplayError(f"{path}: no such file") from None
     except OSError as e:
         raise ReplayError(f"{path}: cannot read: {e.strerror or e}") from None
+    except MemoryError:
+        raise ReplayError(f"{path}: too large to read into memory") from None
     if not data.startswith(MCAP_MAGIC):
         raise ReplayError(f"{path}: not an MCAP file (no MCAP magic at the start)")
     end, complete = _complete_prefix(data)
@@ -352,8 +444,26 @@ def plot(rec: Recording, out: "str | Path") -> Path:
     return out
 
 
+def figure_path(path: "str | Path", out: "Optional[str | Path]" = None) -> Path:
+    """Where the figure of recording ``path`` goes: ``out`` when it names a ``.png`` file; inside
+    ``out`` as ``<name of path>.png`` when it is a folder (one that exists, or spelled with a
+    trailing ``/``); without ``out`` beside ``path``. Raises :class:`ReplayError` for any other
+    ``out``."""
+    src = Path(path)
+    if out is None:
+        return src.with_suffix(".png")
+    o = Path(out)
+    if o.is_dir() or str(out).endswith(("/", os.sep)):
+        return o / (src.stem + ".png")
+    if o.suffix.lower() != ".png":
+        raise ReplayError(f"--out {out}: the figure is a PNG: give a path ending in .png, or a folder")
+    return o
+
+
 def replay(path: "str | Path", out: "Optional[str | Path]" = None) -> Tuple[Recording, Path, str]:
-    """Read ``path``, draw the figure (default: next to it, ``.png``) and summarise."""
+    """Read ``path``, check the messages it draws, draw the figure (``figure_path``) and
+    summarise."""
     rec = read_recording(path)
-    png = plot(rec, Path(out) if out else Path(path).with_suffix(".png"))
+    check_messages(rec)
+    png = plot(rec, figure_path(path, out))
     return rec, png, summarize(rec)

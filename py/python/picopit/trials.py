@@ -35,6 +35,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
+from .outputs import check_dir, check_file
+
 VEHICLE_BIN = "pit-vehicle"
 CONTROLLER_BIN = "pit-controller"
 HALF_SCALE_SCENARIOS = Path("data/trials/half_scale.jsonl")
@@ -128,7 +130,9 @@ def load_cases(path: Path) -> Dict[str, Dict[str, Any]]:
 
 
 def parse_cases(text: Optional[str], known: Sequence[str]) -> List[str]:
-    if not text:
+    """The case ids of ``--cases`` (all of ``known`` when the option is not given; an empty
+    list is an error, not "all")."""
+    if text is None:
         return list(known)
     ids = [c.strip() for c in text.split(",") if c.strip()]
     if not ids:
@@ -853,8 +857,9 @@ def build_config(args: Any) -> TrialsConfig:
 def run(args: Any, command: str) -> Tuple[Dict[str, Any], List[Dict[str, Any]], Dict[str, Path]]:
     """``picopit trials``: run, summarise, write; returns the summary, the rows and the paths."""
     cfg = build_config(args)
-    out = Path(args.out) if args.out else default_out()
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_dir(Path(args.out) if args.out else default_out(), "--out")
+    if args.json:
+        check_file(args.json, "--json")
     info: Dict[str, Any] = {
         "command": command, "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "git_commit": git_commit(), "machine": machine(), "scenarios": str(cfg.scenarios),

@@ -8,10 +8,11 @@
 use clap::{Parser, ValueEnum};
 use planner::{ControllerSettings, PitController};
 use std::path::PathBuf;
-use vehicle_io::cli::{fail, load_scenario, read_text, write_json};
+use vehicle_io::cli::{check_writable, fail, load_scenario, read_text, write_json};
 use vehicle_io::config::{ControllerClock, ControllerIoSettings};
 use vehicle_io::control::ControlLoop;
 use vehicle_io::ports::{ControllerPorts, ServiceNames};
+use vehicle_io::run::Ending;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Clock {
@@ -50,7 +51,7 @@ struct Args {
     #[arg(long)]
     id: String,
     /// Settings file (TOML, `ControllerIoSettings`: prefix, period, stale_periods, deadline,
-    /// peer_timeout, compensate_delay, actuation_delay, max_compensation, fallback_brake,
+    /// peer_timeout, connect_timeout, peer_lost_timeout, compensate_delay, actuation_delay, max_compensation, fallback_brake,
     /// clock, model, models_dir, exit_when_finished and a [controller] table).
     #[arg(long)]
     config: Option<PathBuf>,
@@ -73,6 +74,12 @@ struct Args {
     /// Wall-time deadline of one control step (s); a later step publishes the fallback.
     #[arg(long)]
     deadline: Option<f64>,
+    /// Wall time to wait for the vehicle's first heartbeat or state before giving up (s).
+    #[arg(long)]
+    connect_timeout: Option<f64>,
+    /// Wall time without a word from the vehicle, once heard, before giving up (s).
+    #[arg(long)]
+    peer_lost_timeout: Option<f64>,
     /// Turn the delay compensation off (the states are used as measured).
     #[arg(long)]
     no_delay_compensation: bool,
@@ -125,6 +132,12 @@ fn settings(args: &Args) -> Result<ControllerIoSettings, String> {
     if let Some(d) = args.deadline {
         s.deadline = d;
     }
+    if let Some(v) = args.connect_timeout {
+        s.connect_timeout = v;
+    }
+    if let Some(v) = args.peer_lost_timeout {
+        s.peer_lost_timeout = v;
+    }
     if args.no_delay_compensation {
         s.compensate_delay = false;
     }
@@ -169,6 +182,9 @@ fn main() {
     }
     let mut s = s;
     s.models_dir = resolve_models_dir(&s.models_dir);
+    if let Some(p) = &args.summary {
+        check_writable(p, "--summary").unwrap_or_else(|e| fail(&e));
+    }
     let sc = load_scenario(&args.scenario, &args.id).unwrap_or_else(|e| fail(&e));
     let params = sc.params.load().unwrap_or_else(|e| fail(&e.to_string()));
     let road = sc.build_road().unwrap_or_else(|e| fail(&e.to_string()));
@@ -215,5 +231,29 @@ fn main() {
     );
     if let Some(p) = &args.summary {
         write_json(p, &summary).unwrap_or_else(|e| fail(&e));
+    }
+    if summary.ending.is_failure() {
+        eprintln!(
+            "pit-controller: error: {} (prefix {:?})",
+            failure_text(summary.ending, &lp),
+            lp.settings().prefix
+        );
+    }
+    std::process::exit(summary.ending.exit_code());
+}
+
+/// Why the controller gave up, in words.
+fn failure_text(ending: Ending, lp: &ControlLoop) -> String {
+    let s = lp.settings();
+    match ending {
+        Ending::NoPeer => format!(
+            "no vehicle heard within connect_timeout = {} s; is pit-vehicle running with the same --prefix?",
+            s.connect_timeout
+        ),
+        Ending::PeerLost => format!(
+            "the vehicle went silent for peer_lost_timeout = {} s; giving up",
+            s.peer_lost_timeout
+        ),
+        _ => "the iceoryx2 transport failed".to_owned(),
     }
 }

@@ -6,7 +6,7 @@
 
 use clap::{Parser, ValueEnum};
 use std::path::PathBuf;
-use vehicle_io::cli::{fail, load_scenario, read_text, write_json};
+use vehicle_io::cli::{check_writable, fail, load_scenario, read_text, write_json};
 use vehicle_io::config::{VehicleClock, VehicleIoSettings};
 use vehicle_io::ports::{ServiceNames, VehiclePorts};
 use vehicle_io::vehicle::SimBridge;
@@ -44,7 +44,7 @@ struct Args {
     #[arg(long)]
     id: String,
     /// Settings file (TOML, `VehicleIoSettings`: prefix, period, clock, lockstep_timeout,
-    /// command_timeout, connect_timeout, safe_stop_brake, seed, soak_periods and the
+    /// command_timeout, resume_after, connect_timeout, safe_stop_brake, seed, soak_periods and the
     /// [uncertainty] and [faults] tables).
     #[arg(long)]
     config: Option<PathBuf>,
@@ -75,6 +75,10 @@ struct Args {
     /// No valid command for this long (s): the vehicle's own safe stop.
     #[arg(long)]
     command_timeout: Option<f64>,
+    /// Consecutive fresh commands that release a safe stop latched on the command timeout
+    /// (0: it stays latched until the run ends).
+    #[arg(long)]
+    resume_after: Option<u32>,
     /// Simulated clock: wall time to wait for each answer (s).
     #[arg(long)]
     lockstep_timeout: Option<f64>,
@@ -135,6 +139,9 @@ fn settings(args: &Args) -> Result<VehicleIoSettings, String> {
     if let Some(v) = args.command_timeout {
         s.command_timeout = v;
     }
+    if let Some(v) = args.resume_after {
+        s.resume_after = v;
+    }
     if let Some(v) = args.lockstep_timeout {
         s.lockstep_timeout = v;
     }
@@ -171,6 +178,9 @@ fn main() {
         );
         return;
     }
+    if let Some(p) = &args.summary {
+        check_writable(p, "--summary").unwrap_or_else(|e| fail(&e));
+    }
     let sc = load_scenario(&args.scenario, &args.id).unwrap_or_else(|e| fail(&e));
     let params = sc.params.load().unwrap_or_else(|e| fail(&e.to_string()));
     let mut bridge = SimBridge::new(&sc, s.uncertainty, s.period, s.seed, s.safe_stop_brake)
@@ -199,8 +209,9 @@ fn main() {
         }
     }
     let metrics = bridge.metrics();
+    let ending = io.ending;
     eprintln!(
-        "pit-vehicle: {:?} at t = {:.2} s after {} periods; outcome {}; {} states ({} dropped), {} commands applied, {} lock-step misses; safe stop {:?}; IPC median {:.1} µs, p99 {:.1} µs",
+        "pit-vehicle: {:?} at t = {:.2} s after {} periods; outcome {}; {} states ({} dropped), {} commands applied, {} lock-step misses; {} safe stops ({} resumed, last {:?}); IPC median {:.1} µs, p99 {:.1} µs",
         io.ending,
         io.time,
         io.periods,
@@ -209,6 +220,8 @@ fn main() {
         io.states_dropped,
         io.commands_applied,
         io.lockstep_misses,
+        io.safe_stops,
+        io.resumes,
         io.safe_stop.map(|r| r.reason),
         io.ipc_us.median,
         io.ipc_us.p99
@@ -225,4 +238,15 @@ fn main() {
         };
         write_json(p, &report).unwrap_or_else(|e| fail(&e));
     }
+    if ending.is_failure() {
+        let why = match ending {
+            vehicle_io::run::Ending::NoPeer => format!(
+                "no controller heard within connect_timeout = {} s; is pit-controller running with the same --prefix?",
+                s.connect_timeout
+            ),
+            _ => "the iceoryx2 transport failed".to_owned(),
+        };
+        eprintln!("pit-vehicle: error: {why} (prefix {:?})", s.prefix);
+    }
+    std::process::exit(ending.exit_code());
 }
