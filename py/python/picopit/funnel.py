@@ -105,8 +105,9 @@ def plot(ax, funnels: Mapping[str, Mapping[str, Any]]) -> None:
         ys = [100.0 * f[s] / n for s in STAGES]
         ax.plot(list(x), ys, marker="o", label=name, color=f"C{i}")
         for xi, y, s in zip(x, ys, STAGES):
-            ax.annotate(str(f[s]), (xi, y), textcoords="offset points", xytext=(4, 3), fontsize=7,
-                        color=f"C{i}")
+            # Stacked labels: configurations often land on the same point.
+            ax.annotate(str(f[s]), (xi, y), textcoords="offset points", xytext=(5, 2 - 9 * i),
+                        fontsize=7, color=f"C{i}")
     ax.set_xticks(list(x), ["scenes", "first contact", "reversed", "success"])
     ax.set_ylim(0, 105)
     ax.set_ylabel("scenes (%)")
