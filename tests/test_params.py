@@ -47,6 +47,10 @@ def test_param_error_is_a_value_error_exported_at_top_level():
         ("bullet.tyre", "pdy1", "pdy1 = inf", "bullet.tyre.pdy1"),
         ("contact", "friction", "friction = -0.4", "contact.friction"),
         ("target", "brake_bias_front", "brake_bias_front = 1.5", "target.brake_bias_front"),
+        ("target", "mass", "mass = 1e308", "target.mass = 1e308: outside the physical range"),
+        ("bullet", "iz", "iz = 1e-9", "bullet.iz = 1e-9: outside the physical range [0.01, 1e6] kg m^2"),
+        ("contact", "stiffness", "stiffness = 1e15", "contact.stiffness = 1e15: outside the physical range [1000, 1e8] N/m"),
+        ("bullet.tyre", "pdy1", "pdy1 = 1e308", "bullet.tyre.pdy1 = 1e308: outside"),
         ("target", "mass", None, "mass"),  # missing field
         ("contact", "restitution", "restitution = 0.3\nwobble = 2.0", "wobble"),  # unknown field
     ],

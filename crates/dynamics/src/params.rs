@@ -294,6 +294,30 @@ fn check(prefix: &str, name: &str, value: f64, rule: Rule) -> Result<(), ParamEr
     }
 }
 
+/// `value` within the physical range `[lo, hi]` (in `unit`), checked after its sign rule.
+fn within(prefix: &str, name: &str, value: f64, (lo, hi, unit): Range) -> Result<(), ParamError> {
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(ParamError::OutOfRange {
+            field: format!("{prefix}.{name}"),
+            value,
+            lo,
+            hi,
+            unit,
+        })
+    }
+}
+
+/// A physical range `(lo, hi, unit)`.
+type Range = (f64, f64, &'static str);
+
+macro_rules! ranges {
+    ($prefix:expr, $s:expr, { $($field:ident : $range:expr),* $(,)? }) => {{
+        $( within($prefix, stringify!($field), $s.$field, $range)?; )*
+    }};
+}
+
 macro_rules! rules {
     ($prefix:expr, $s:expr, { $($field:ident : $rule:ident),* $(,)? }) => {{
         $( check($prefix, stringify!($field), $s.$field, Rule::$rule)?; )*
@@ -307,6 +331,19 @@ impl TyreParams {
             pdy1: Positive, pey1: AtMostOne, pky1: Positive, rbx1: Positive, rbx2: Finite,
             rcx1: Positive, rex1: AtMostOne, rby1: Positive, rby2: Finite, rcy1: Positive,
             rey1: AtMostOne,
+        });
+        // Magic Formula coefficients of passenger-car and light-truck tyres (Pacejka 2012,
+        // ch. 4; the CommonRoad/ADAMS sets) lie well inside these bounds.
+        let shape = (0.5, 3.0, "");
+        let peak = (0.1, 3.0, "");
+        let curvature = (-10.0, 1.0, "");
+        let slip_stiffness = (1.0, 100.0, "per unit slip and load");
+        let weighting = (-100.0, 100.0, "");
+        ranges!(prefix, self, {
+            pcx1: shape, pdx1: peak, pex1: curvature, pkx1: slip_stiffness, pcy1: shape,
+            pdy1: peak, pey1: curvature, pky1: slip_stiffness, rbx1: weighting, rbx2: weighting,
+            rcx1: shape, rex1: curvature, rby1: weighting, rby2: weighting, rcy1: shape,
+            rey1: curvature,
         });
         Ok(())
     }
@@ -341,6 +378,31 @@ impl VehicleParams {
             drive_torque_max: NonNegative, drive_torque_min: Finite,
             torque_time_constant: NonNegative, brake_torque_max: NonNegative,
             brake_bias_front: Fraction, rolling_resistance: NonNegative, drag_area: NonNegative,
+        });
+        // Every road vehicle from a 1:5 scale model (~10 kg) to a heavy truck (~40 t).
+        let inertia = (1e-2, 1e6, "kg m^2");
+        let axle = (0.05, 10.0, "m");
+        let height = (0.02, 3.0, "m");
+        let roll_stiffness = (1.0, 1e7, "N m/rad");
+        let roll_damping = (0.0, 1e6, "N m s/rad");
+        let torque = (0.0, 1e5, "N m");
+        let lag = (0.0, 2.0, "s");
+        ranges!(prefix, self, {
+            mass: (10.0, 4e4, "kg"), sprung_mass: (5.0, 4e4, "kg"), iz: inertia,
+            ix_sprung: inertia, iy_sprung: inertia, lf: axle, lr: axle,
+            track_front: (0.1, 3.0, "m"), track_rear: (0.1, 3.0, "m"), h_cg: height,
+            h_sprung: height, h_roll_axis: (0.0, 2.0, "m"), length: (0.2, 25.0, "m"),
+            width: (0.1, 3.0, "m"), height: (0.1, 5.0, "m"), cg_to_front: (0.1, 20.0, "m"),
+            bumper_height: (0.02, 1.5, "m"), roll_stiffness_front: roll_stiffness,
+            roll_stiffness_rear: roll_stiffness, roll_damping_front: roll_damping,
+            roll_damping_rear: roll_damping, pitch_stiffness: (1.0, 1e8, "N m/rad"),
+            pitch_damping: (0.0, 1e7, "N m s/rad"), wheel_radius: (0.02, 1.5, "m"),
+            wheel_inertia: (1e-4, 200.0, "kg m^2"), drive_efficiency: (0.3, 1.0, ""),
+            gear_ratio: (0.5, 50.0, ""), steer_rate_max: (0.01, 10.0, "rad/s"),
+            steer_time_constant: lag, drive_torque_max: torque,
+            drive_torque_min: (-1e5, 0.0, "N m"), torque_time_constant: lag,
+            brake_torque_max: torque, rolling_resistance: (0.0, 0.1, ""),
+            drag_area: (0.0, 20.0, "m^2"),
         });
         let invalid = |field: &str, value: f64, reason: &'static str| {
             Err(ParamError::Invalid {
@@ -458,6 +520,10 @@ impl PowertrainParams {
         rules!(prefix, self, {
             engine_drag_torque: NonNegative, stall_speed: NonNegative, stall_torque: NonNegative,
         });
+        ranges!(prefix, self, {
+            engine_drag_torque: (0.0, 2000.0, "N m"), stall_speed: (0.0, 500.0, "rad/s"),
+            stall_torque: (0.0, 1e4, "N m"),
+        });
         Ok(())
     }
 }
@@ -467,6 +533,12 @@ impl ContactParams {
         rules!(prefix, self, {
             stiffness: Positive, restitution: Positive, friction: NonNegative,
             slip_speed: Positive, obstacle_stiffness_factor: Positive,
+        });
+        // A PIT push's contact stiffness is 2–7e5 N/m at full size (REFERENCES.md, impact
+        // mechanics); the plant step must also resolve the contact (`Plant::new`).
+        ranges!(prefix, self, {
+            stiffness: (1e3, 1e8, "N/m"), friction: (0.0, 2.0, ""),
+            slip_speed: (1e-3, 1.0, "m/s"), obstacle_stiffness_factor: (0.1, 100.0, ""),
         });
         if !(0.15..=1.0).contains(&self.restitution) {
             return Err(ParamError::Invalid {
@@ -559,6 +631,77 @@ mod tests {
                 checked += 1;
             }
             assert!(checked > 80, "{set}: only {checked} fields checked");
+        }
+    }
+
+    #[test]
+    fn every_numeric_field_refuses_absurd_magnitudes_and_names_itself() {
+        // Finite but absurd: ±1e308 in any field is outside its physical range, refused with
+        // an error naming exactly that field.
+        for set in ParamSet::BUILTIN {
+            let src = ParamSet::builtin_source(set).unwrap();
+            let mut table = String::new();
+            let mut checked = 0;
+            for line in src.lines() {
+                let t = line.trim();
+                if t.starts_with('[') {
+                    table = t.trim_matches(|c| c == '[' || c == ']').to_owned();
+                    continue;
+                }
+                let Some((key, value)) = t.split_once('=') else {
+                    continue;
+                };
+                let (key, value) = (key.trim(), value.split('#').next().unwrap().trim());
+                if value.parse::<f64>().is_err() {
+                    continue; // strings
+                }
+                for bad in ["1e308", "-1e308"] {
+                    let text = replace_line(src, &table, key, Some(&format!("{key} = {bad}")));
+                    let err = ParamSet::from_toml_str(&text, "prop.toml")
+                        .unwrap_err()
+                        .to_string();
+                    let field = format!("{table}.{key}");
+                    assert!(
+                        err.starts_with(&field),
+                        "{set}: {field} = {bad} gave {err:?}"
+                    );
+                }
+                checked += 1;
+            }
+            assert!(checked > 80, "{set}: only {checked} fields checked");
+        }
+    }
+
+    #[test]
+    fn the_issues_absurd_values_are_refused_with_their_range() {
+        let src = ParamSet::builtin_source("full_size").unwrap();
+        let cases = [
+            ("target", "mass", "mass = 1e308", "target.mass", "kg"),
+            ("bullet", "iz", "iz = 1e-9", "bullet.iz", "kg m^2"),
+            (
+                "contact",
+                "stiffness",
+                "stiffness = 1e15",
+                "contact.stiffness",
+                "N/m",
+            ),
+            (
+                "target.tyre",
+                "pdy1",
+                "pdy1 = 1e308",
+                "target.tyre.pdy1",
+                "range",
+            ),
+        ];
+        for (table, key, line, field, unit) in cases {
+            let text = replace_line(src, table, key, Some(line));
+            let err = ParamSet::from_toml_str(&text, "test.toml").unwrap_err();
+            assert!(matches!(err, ParamError::OutOfRange { .. }), "{err:?}");
+            let msg = err.to_string();
+            assert!(
+                msg.starts_with(field) && msg.contains("physical range") && msg.contains(unit),
+                "{msg}"
+            );
         }
     }
 

@@ -401,12 +401,40 @@ pub struct Plant {
     accum: ContactAccumulator,
 }
 
+/// Largest `ω dt` of a contact the plant accepts: a contact period of at least 4π (≈ 12.6)
+/// steps, so the spring–damper is integrated, not aliased.
+const MAX_CONTACT_OMEGA_DT: f64 = 0.5;
+
+/// Refuse a contact stiffness the plant step cannot resolve: `ω = √(k · m_eff⁻¹)` with the
+/// largest effective inverse mass a contact can see (a blow at the farthest body corner,
+/// perpendicular to its arm) for the car–car pair and for either car on an obstacle.
+fn check_contact_resolved(params: &ParamSet, dt: f64) -> Result<(), ParamError> {
+    let inverse_mass = |v: &VehicleParams| {
+        let reach = v.cg_to_front.max(v.length - v.cg_to_front);
+        1.0 / v.mass + (reach * reach + 0.25 * v.width * v.width) / v.iz
+    };
+    let (b, t) = (inverse_mass(&params.bullet), inverse_mass(&params.target));
+    let k = params.contact.stiffness;
+    let k_obstacle = k * params.contact.obstacle_stiffness_factor;
+    let omega = (k * (b + t)).sqrt().max((k_obstacle * b.max(t)).sqrt());
+    if omega * dt > MAX_CONTACT_OMEGA_DT {
+        return Err(ParamError::Invalid {
+            field: "contact.stiffness".to_owned(),
+            value: k,
+            reason: "too stiff for the plant step: a contact period must span at least 12 steps \
+                     (lower the stiffness or the obstacle factor, or the plant dt)",
+        });
+    }
+    Ok(())
+}
+
 impl Plant {
     /// A plant for a parameter set. The vehicles start at rest at the origin; call
     /// [`Plant::reset`].
     pub fn new(params: &ParamSet, config: PlantConfig) -> Result<Self, ParamError> {
         params.validate()?;
         config.validate()?;
+        check_contact_resolved(params, config.dt)?;
         let law = ContactLaw::from_params(&params.contact);
         let target_driveline = match config.target_gear {
             Gear::Neutral => None,

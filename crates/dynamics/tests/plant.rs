@@ -673,3 +673,45 @@ fn a_target_spun_round_in_gear_stalls_and_comes_to_rest_within_the_bound() {
         );
     }
 }
+
+#[test]
+fn a_contact_the_step_cannot_resolve_is_refused_and_the_stiffest_accepted_one_is_sound() {
+    let mut set = full();
+    set.contact.stiffness = 1e8;
+    let err = Plant::new(&set, PlantConfig::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.starts_with("contact.stiffness") && err.contains("plant step"),
+        "{err}"
+    );
+    // The stiffest accepted contact (within 10 %), elastic and frictionless with tyres off:
+    // it neither creates energy nor loses momentum.
+    set.contact.restitution = 1.0;
+    set.contact.friction = 0.0;
+    let config = PlantConfig {
+        tyre_forces: false,
+        ..PlantConfig::default()
+    };
+    set.contact.stiffness = 4e5;
+    while Plant::new(&set, config).is_ok() {
+        set.contact.stiffness *= 1.1;
+    }
+    set.contact.stiffness /= 1.1;
+    assert!(set.contact.stiffness > 4e6, "{}", set.contact.stiffness);
+    let mut p = Plant::new(&set, config).unwrap();
+    pit_start(&mut p, 15.0, 4.0);
+    let (e0, m0) = (p.planar_kinetic_energy(), p.total_momentum());
+    let mut touched = false;
+    for _ in 0..2000 {
+        p.step();
+        touched |= p.contact().is_some();
+    }
+    assert!(touched && p.contact().is_none());
+    let rel = (p.planar_kinetic_energy() - e0) / e0;
+    assert!(
+        (-0.02..=1e-6).contains(&rel),
+        "stiffest contact: energy change {rel:e}"
+    );
+    assert!((p.total_momentum() - m0).norm() / m0.norm() <= 1e-6);
+}
