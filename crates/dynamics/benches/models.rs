@@ -85,6 +85,7 @@ fn samples(set: &ParamSet) -> Vec<Sample> {
 }
 
 fn models(c: &mut Criterion) {
+    bench_ref::bench(c, "models", bench_ref::At::Start);
     let set = ParamSet::builtin("full_size").expect("built-in set");
     let data = samples(&set);
     // One RK4 step over dt (the unit of the 1 µs goal) and the default, stable sub-stepping.
@@ -155,6 +156,7 @@ fn models(c: &mut Criterion) {
         });
     });
     g.finish();
+    bench_ref::bench(c, "models", bench_ref::At::End);
 }
 
 criterion_group! {

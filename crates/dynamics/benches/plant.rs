@@ -32,6 +32,7 @@ fn pit_episode(p: &mut Plant) {
 }
 
 fn bench(c: &mut Criterion) {
+    bench_ref::bench(c, "plant", bench_ref::At::Start);
     let set = ParamSet::builtin("full_size").unwrap();
     let mut plant = Plant::new(&set, PlantConfig::default()).unwrap();
     let mut g = c.benchmark_group("plant");
@@ -53,6 +54,7 @@ fn bench(c: &mut Criterion) {
         });
     });
     g.finish();
+    bench_ref::bench(c, "plant", bench_ref::At::End);
 }
 
 criterion_group!(benches, bench);

@@ -45,6 +45,7 @@ fn bench_surrogate(
 }
 
 fn ctrl_step(c: &mut Criterion) {
+    bench_ref::bench(c, "ctrl_step", bench_ref::At::Start);
     let params = ParamSet::builtin("full_size").unwrap();
     let road = Road::straight(2000.0, 3, 3.5, 1.0);
     let records = record(&params, &road);
@@ -65,6 +66,7 @@ fn ctrl_step(c: &mut Criterion) {
             Err(e) => eprintln!("ctrl_step/{kind}: skipped ({}: {e})", path.display()),
         }
     }
+    bench_ref::bench(c, "ctrl_step", bench_ref::At::End);
 }
 
 criterion_group!(benches, ctrl_step);

@@ -93,6 +93,7 @@ fn bench_step_jac(
 }
 
 fn pico(c: &mut Criterion) {
+    bench_ref::bench(c, "pico", bench_ref::At::Start);
     let data = samples();
     // The gated configurations: the default kernel and Jacobian mode.
     for widths in [
@@ -180,6 +181,7 @@ fn pico(c: &mut Criterion) {
             Err(e) => eprintln!("skipping {}: {e}", path.display()),
         }
     }
+    bench_ref::bench(c, "pico", bench_ref::At::End);
 }
 
 criterion_group! {
