@@ -132,25 +132,49 @@ def test_per_episode_results_agree_with_the_summary(bench_run):
             assert float(v) >= 0.0 and float(r["reversed_at"]) > 0.0
 
 
-def test_representative_cases_are_drawn_and_logged(bench_run):
-    proc, tmp = bench_run
+TEXTBOOK = REPO / "data" / "textbook" / "scenarios.jsonl"
+
+
+@pytest.fixture(scope="module")
+def textbook_run(tmp_path_factory):
+    """Six textbook PIT scenes (straight dry highway, no obstacles), simulated clock: the
+    outcomes are the same on any machine."""
+    tmp = tmp_path_factory.mktemp("textbook")
+    proc = subprocess.run(picopit_cmd() + ["bench", "--scenarios", str(TEXTBOOK), "--models", str(MODELS),
+                                           "--limit", "6", "--clock", "simulated", "--workers", "2",
+                                           "--out", "run", "--no-progress"],
+                          cwd=tmp, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
-    run = tmp / "run"
-    notes = json.loads((run / "summary.json").read_text())["run"]["notes"]
-    drawn = [k for k in ("success", "failure") if (run / f"case_{k}.png").exists()]
-    for k in ("success", "failure"):
-        assert k in drawn or any(f"no {k} episode" in n for n in notes), k
-    if drawn:
-        if (run / "cases.mcap").exists():
-            reader = pytest.importorskip("mcap.reader")
-            with open(run / "cases.mcap", "rb") as fh:
-                r = reader.make_reader(fh)
-                topics = {c.topic for c in r.get_summary().channels.values()}
-                msgs = [json.loads(m.data) for _, _, m in r.iter_messages(topics=[f"/{drawn[0]}/step"])]
-            assert f"/{drawn[0]}/summary" in topics
-            assert msgs and {"time", "target", "bullet", "command", "phase"} <= set(msgs[0])
-        else:
-            assert (run / "cases.mcap.txt").exists()
+    return json.loads((tmp / "run" / "summary.json").read_text()), tmp / "run"
+
+
+def test_the_upper_layer_pits_textbook_scenes_and_the_ablation_does_not(textbook_run):
+    doc, _ = textbook_run
+    successes = {name: c["successes"] for name, c in doc["configs"].items()}
+    for name in ("4dof", "pinn", "picopinn"):
+        assert successes[name] >= 4, successes
+    assert successes["picopinn_no_upper"] <= 1, successes
+
+
+def test_representative_cases_are_drawn_and_logged(textbook_run):
+    """A success case is drawn whenever the PicoPINN saved a scene and a failure case whenever
+    it lost one, each with its steps and summary in cases.mcap."""
+    doc, run = textbook_run
+    pico = doc["configs"]["picopinn"]
+    present = {"success": pico["successes"] > 0, "failure": pico["successes"] < pico["episodes"]}
+    assert any(present.values())
+    for kind, there in present.items():
+        assert (run / f"case_{kind}.png").exists() == there, kind
+    reader = pytest.importorskip("mcap.reader")
+    with open(run / "cases.mcap", "rb") as fh:
+        r = reader.make_reader(fh)
+        topics = {c.topic for c in r.get_summary().channels.values()}
+        for kind, there in present.items():
+            assert (f"/{kind}/summary" in topics) == there, kind
+            if there:
+                msgs = [json.loads(m.data) for _, _, m in r.iter_messages(topics=[f"/{kind}/step"])]
+                assert msgs and {"time", "target", "bullet", "command", "phase"} <= set(msgs[0])
+                assert msgs[-1]["time"] > msgs[0]["time"]
 
 
 @pytest.mark.parametrize("args, needle", [
