@@ -322,8 +322,11 @@ impl RoadDef {
                 if turn > std::f64::consts::PI + 1e-9 {
                     return Err(ScenarioError::field(
                         line,
-                        f("radius"),
-                        format!("{r}: the curve turns {turn:.3} rad; at most π"),
+                        f("(length, entry, transition, radius)"),
+                        format!(
+                            "({}, {}, {}, {r}): the curve turns {turn:.3} rad; at most π",
+                            self.length, self.entry, self.transition
+                        ),
                     ));
                 }
             }
@@ -663,11 +666,15 @@ impl Scenario {
                     ));
                 }
             }
-            if o.body.vx.hypot(o.body.vy) > 60.0 {
+            let speed = o.body.vx.hypot(o.body.vy);
+            if speed > 60.0 {
                 return Err(ScenarioError::field(
                     line,
-                    format!("obstacles[{i}].body.vx"),
-                    "speed above 60 m/s",
+                    format!("obstacles[{i}].body.(vx, vy)"),
+                    format!(
+                        "({}, {}): speed {speed:.1} m/s; at most 60 m/s",
+                        o.body.vx, o.body.vy
+                    ),
                 ));
             }
         }
