@@ -106,3 +106,4 @@ pub fn wait_for_messages(path: &Path, topic: &str, n: usize, limit: Duration) {
         std::thread::sleep(Duration::from_millis(10));
     }
 }
+pub mod schema_check;
