@@ -22,6 +22,7 @@
 //! | `/bullet/state`         | `picopit.BulletPlot`       | JSON     | each state         |
 //! | `/target/state`         | `picopit.TargetPlot`       | JSON     | each state         |
 //! | `/contact`              | `picopit.Contact`          | JSON     | each state         |
+//! | `/road`                 | `picopit.Road`             | JSON     | once, at the start |
 //!
 //! The raw topics hold the payload as serde writes it (a non-finite number reads `null`), with
 //! the JSON Schemas of [`schema`]. The `foxglove.*` topics are the Foxglove SDK's own message
@@ -89,6 +90,8 @@ pub mod topic {
     pub const BULLET_STATE: &str = "/bullet/state";
     pub const TARGET_STATE: &str = "/target/state";
     pub const CONTACT: &str = "/contact";
+    /// The road's polylines, once, when the recording starts (when the recorder has a road).
+    pub const ROAD: &str = "/road";
     /// The raw topics (one per iceoryx2 publish-subscribe service).
     pub const RAW: [&str; 5] = [
         STATE,
@@ -97,8 +100,9 @@ pub mod topic {
         HEARTBEAT_CONTROLLER,
         HEARTBEAT_VEHICLE,
     ];
-    /// Every topic, raw first, then the derived ones (one message each per finite state).
-    pub const ALL: [&str; 12] = [
+    /// Every topic: the raw ones, the derived ones (one message each per finite state), and
+    /// [`ROAD`].
+    pub const ALL: [&str; 13] = [
         STATE,
         COMMAND,
         STATUS,
@@ -111,6 +115,7 @@ pub mod topic {
         BULLET_STATE,
         TARGET_STATE,
         CONTACT,
+        ROAD,
     ];
 }
 

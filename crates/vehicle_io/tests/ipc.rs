@@ -153,6 +153,7 @@ fn a_lock_step_run_over_ipc_equals_the_in_process_episode() {
             .entities
             .iter()
             .any(|e| e.id == "road" && e.lines.len() == 3));
+        assert_eq!(rec.counts["/road"], 1, "{}", path.display());
     }
 }
 

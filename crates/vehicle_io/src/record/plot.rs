@@ -3,7 +3,8 @@
 //! of an index into `/state.bullet`. Times are the state's measurement time `stamp_ns`.
 
 use super::scene::timestamp;
-use super::schema::{float, object, time};
+use super::schema::{float, floats, object, time};
+use super::RoadLines;
 use crate::msg::{StateEstimate, STATE_CONTACT};
 use serde::Serialize;
 use serde_json::{json, Value};
@@ -185,6 +186,40 @@ pub fn contact_schema() -> Value {
             "normal_heading": float("world heading gamma of the normal, bullet into target (rad)"),
             "point_x": float("contact point, target body x (m)"),
             "point_y": float("contact point, target body y (m)"),
+        }),
+    )
+}
+
+/// `/road`: the road's polylines `[[X, Y], …]` (m, frame `world`).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct RoadPlot<'a> {
+    pub left: &'a [[f64; 2]],
+    pub right: &'a [[f64; 2]],
+    pub centre: &'a [[f64; 2]],
+}
+
+/// The road message of `road`.
+#[must_use]
+pub fn road(road: &RoadLines) -> RoadPlot<'_> {
+    RoadPlot {
+        left: &road.left,
+        right: &road.right,
+        centre: &road.centre,
+    }
+}
+
+/// The JSON Schema of `/road`.
+#[must_use]
+pub fn road_schema() -> Value {
+    let line =
+        |d: &str| json!({"type": "array", "items": floats(2, "[X, Y] (m)"), "description": d});
+    object(
+        "picopit.Road",
+        "The road as polylines in frame world (written once, when the recording starts).",
+        json!({
+            "left": line("left edge"),
+            "right": line("right edge"),
+            "centre": line("reference (centre) line"),
         }),
     )
 }

@@ -150,7 +150,7 @@ pub fn heartbeat_schema() -> Value {
 
 #[cfg(test)]
 mod tests {
-    use super::super::plot;
+    use super::super::{plot, RoadLines};
     use super::*;
     use crate::msg::{ActuatorCommand, ControllerStatus, Heartbeat, StateEstimate};
 
@@ -190,6 +190,10 @@ mod tests {
             (
                 plot::contact_schema(),
                 serde_json::to_value(plot::contact(&s)),
+            ),
+            (
+                plot::road_schema(),
+                serde_json::to_value(plot::road(&RoadLines::default())),
             ),
         ] {
             let value = value.unwrap();

@@ -35,6 +35,7 @@ const I_TARGET_POSE: usize = 8;
 const I_BULLET_STATE: usize = 9;
 const I_TARGET_STATE: usize = 10;
 const I_CONTACT: usize = 11;
+const I_ROAD: usize = 12;
 const N_TOPICS: usize = topic::ALL.len();
 const N_RAW: usize = topic::RAW.len();
 
@@ -82,6 +83,7 @@ fn schemas() -> [(SchemaDef, String); N_TOPICS] {
         json(plot::bullet_schema()),
         json(plot::target_schema()),
         json(plot::contact_schema()),
+        json(plot::road_schema()),
     ]
 }
 
@@ -184,9 +186,8 @@ impl Sink {
                 metadata: md,
             })
             .map_err(mcap_err)?;
-        writer.flush().map_err(mcap_err)?;
 
-        Ok(Self {
+        let mut sink = Self {
             path: path.to_path_buf(),
             writer,
             channel,
@@ -201,7 +202,12 @@ impl Sink {
             buf: Vec::with_capacity(16 * 1024),
             road: scene::road_lines(meta),
             meta: meta.clone(),
-        })
+        };
+        if let Some(road) = &meta.road {
+            sink.write_json(I_ROAD, 0, 0, &plot::road(road))?;
+        }
+        sink.writer.flush().map_err(|e| sink.mcap_err(e))?;
+        Ok(sink)
     }
 
     fn mcap_err(&self, source: mcap::McapError) -> RecordError {

@@ -115,6 +115,16 @@ fn check_foxglove(name: &str, schema: &[u8], data: &[u8], what: &str) -> Option<
     }
 }
 
+/// Whether `data` decodes as the Foxglove type `schema` names (false for another name).
+pub fn decodes(schema: &str, data: &[u8]) -> bool {
+    match schema {
+        "foxglove.SceneUpdate" => SceneUpdate::decode(data).is_ok(),
+        "foxglove.PoseInFrame" => PoseInFrame::decode(data).is_ok(),
+        "foxglove.FrameTransforms" => FrameTransforms::decode(data).is_ok(),
+        _ => false,
+    }
+}
+
 fn stamp(t: Option<Timestamp>, what: &str) {
     let t = t.unwrap_or_else(|| panic!("{what}: no timestamp"));
     assert!(t.nsec() < 1_000_000_000, "{what}: nsec {}", t.nsec());
