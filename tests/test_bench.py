@@ -149,6 +149,15 @@ def test_representative_cases_are_drawn_and_logged(bench_run):
                 msgs = [json.loads(m.data) for _, _, m in r.iter_messages(topics=[f"/{drawn[0]}/step"])]
             assert f"/{drawn[0]}/summary" in topics
             assert msgs and {"time", "target", "bullet", "command", "phase"} <= set(msgs[0])
+            # A log that Foxglove opens: every message valid against its schema, the scene,
+            # transforms and poses with the Foxglove SDK's (tests/foxglove_check.py).
+            assert {f"/{drawn[0]}/{t}" for t in ("scene", "tf", "bullet/pose", "target/pose")} <= topics
+            pytest.importorskip("google.protobuf")
+            pytest.importorskip("jsonschema")
+            from foxglove_check import check_recording
+
+            rec = check_recording(run / "cases.mcap")
+            assert rec.counts[f"/{drawn[0]}/scene"] == len(msgs)
         else:
             assert (run / "cases.mcap.txt").exists()
 

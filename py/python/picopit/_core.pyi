@@ -37,6 +37,12 @@ def footprint(pose: _ArrayLike, length: float, width: float, cg_to_front: float)
     """Corners (4, 2) of a vehicle footprint with its c.g. at ``pose = [X, Y, yaw]``,
     counter-clockwise from front-left."""
 
+def footprint_contact(pose_a: _ArrayLike, size_a: _ArrayLike, pose_b: _ArrayLike,
+                      size_b: _ArrayLike) -> Optional[Dict[str, Any]]:
+    """Where two vehicle footprints overlap (the plant's separating-axis test):
+    ``{"gamma": world heading of the normal from a into b, "point": [X, Y], "depth": m}``,
+    or None apart. ``pose = [X, Y, yaw]`` of the c.g., ``size = [length, width, cg_to_front]``."""
+
 def wrap_angle(a: float) -> float:
     """Wrap an angle to (-pi, pi]."""
 
