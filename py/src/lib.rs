@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 mod bench;
 mod models;
 mod mpc;
+mod oracle;
 mod planner;
 mod plant;
 mod sim;
@@ -257,6 +258,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     surrogate::register(m)?;
     mpc::register(m)?;
     sim::register(m)?;
+    oracle::register(m)?;
     planner::register(m)?;
     bench::register(m)?;
     Ok(())

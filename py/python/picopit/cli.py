@@ -431,6 +431,9 @@ def build_parser() -> argparse.ArgumentParser:
     _eval_parser(sub)
     _scenarios_parser(sub)
     _bench_parser(sub)
+    from .cli_tools import add_parsers
+
+    add_parsers(sub)
     _replay_parser(sub)
     _trials_parser(sub)
     _validate_parser(sub)
@@ -466,6 +469,7 @@ def _check_params_name(name: str) -> None:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
+    from .plots import plot_simulation
     from .simulate import SimulateConfig, load_config_file, run, write_outputs
 
     values: Dict[str, Any] = {}
@@ -484,6 +488,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     check_dir(out, "--out")
     result = run(cfg, progress=not args.no_progress)
     paths = write_outputs(result, out)
+    paths["png"] = out / "simulate.png"
+    plot_simulation(result, paths["png"])
     s = result.summary
     print(
         f"simulate: peak contact force {s['peak_contact_force_N'] / 1e3:.1f} kN, "
@@ -781,6 +787,13 @@ def _main(args: argparse.Namespace) -> int:
         from ._core import EpisodeError, ScenarioError
 
         bad_input += (BenchError, EpisodeError, ScenarioError)
+    if args.command in ("oracle", "trace", "seed-scatter"):
+        from .oracle import OracleError
+        from .seed_scatter import SeedScatterError
+        from .trace import TraceError
+        from ._core import EpisodeError, ScenarioError
+
+        bad_input += (OracleError, TraceError, SeedScatterError, EpisodeError, ScenarioError)
     if args.command == "replay":
         from .replay import ReplayError
 
