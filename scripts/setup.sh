@@ -1,9 +1,26 @@
 #!/usr/bin/env bash
-# Install picopit into ./.venv: a release build of the Rust extension (picopit._core), the
-# Python package (editable: py/python is imported in place) and its dependencies, plus pytest.
-# Idempotent: re-running only rebuilds what changed. Needs python3 (>= 3.9) and cargo.
+# Install picopit into ./.venv: a release build of the Rust extension (picopit._core) and the
+# Python package (editable: py/python is imported in place) with what `picopit bench` needs.
+#
+#   scripts/setup.sh          the main job's set: the extension, numpy, matplotlib, tqdm,
+#                             pyarrow, mcap, foxglove-sdk (and tomli before Python 3.11)
+#   scripts/setup.sh --full   everything: also the extras test (pytest, scipy, CommonRoad's
+#                             vehicle models, protobuf, jsonschema), train (torch, safetensors),
+#                             peers (CasADi), ray, and the pit-controller / pit-vehicle binaries
+#                             (`picopit trials`)
+#
+# Idempotent: re-running only rebuilds what changed; a full set-up stays full. Needs python3
+# (>= 3.9; PYTHON=... picks another interpreter) and cargo.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
+
+FULL=0
+for arg in "$@"; do
+    case "$arg" in
+        --full) FULL=1 ;;
+        *) echo "setup: unknown option '$arg' (usage: scripts/setup.sh [--full])" >&2; exit 2 ;;
+    esac
+done
 
 PYTHON="${PYTHON:-python3}"
 VENV="$PWD/.venv"
@@ -33,13 +50,25 @@ export PATH="$VENV/bin:$PATH"
 export PIP_DISABLE_PIP_VERSION_CHECK=1
 python -m pip install --quiet 'maturin>=1.9.4,<2'
 
-echo "setup: building picopit._core (release) and installing picopit into $VENV"
-# --extras test pulls in pytest, train torch/safetensors/scipy (the surrogate pipeline),
-# peers casadi (benchmarks/peers), ray (picopit bench --ray-address; tests/test_bench.py runs
-# the benchmark on a local Ray instance); the build shares ./target with cargo.
-maturin develop --release --extras test,train,peers,ray --manifest-path py/Cargo.toml
+# The extras: test (pytest; scipy and CommonRoad's models for the plant validation; protobuf and
+# jsonschema for the recording checks), train (torch, safetensors: the surrogate pipeline), peers
+# (CasADi: benchmarks/peers), ray (picopit bench --ray-address; tests/test_bench.py starts a local
+# instance). A set-up that was full once stays full (the marker file), so run.sh after test.sh
+# does not look as if it removed anything. The build shares ./target with cargo.
+MARKER="$VENV/.picopit-full"
+EXTRAS=()
+if [ "$FULL" = 1 ] || [ -e "$MARKER" ]; then
+    FULL=1
+    EXTRAS=(--extras test,train,peers,ray)
+fi
+echo "setup: building picopit._core (release) and installing picopit into $VENV" \
+    "($([ "$FULL" = 1 ] && echo "full: all extras" || echo "the main job's dependencies"))"
+maturin develop --release "${EXTRAS[@]}" --manifest-path py/Cargo.toml
 python -c 'import picopit; print("setup: picopit ready:", ", ".join(picopit.__all__))'
 
-# The vehicle I/O processes (pit-controller, pit-vehicle): `picopit trials` runs them.
-echo "setup: building pit-controller and pit-vehicle (release)"
-cargo build --release --quiet -p picopit-vehicle-io --bins
+if [ "$FULL" = 1 ]; then
+    touch "$MARKER"
+    # The vehicle I/O processes (pit-controller, pit-vehicle): `picopit trials` runs them.
+    echo "setup: building pit-controller and pit-vehicle (release)"
+    cargo build --release --quiet -p picopit-vehicle-io --bins
+fi

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Run all tests: the Rust workspace (default members: the pure-Rust crates) and the Python
-# tests in tests/ against a release build of the extension in ./.venv. Both suites always
+# tests in tests/ against a release build of the extension in ./.venv, set up in full
+# (scripts/setup.sh --full: every extra and the vehicle I/O binaries). Both suites always
 # run; the script fails if either does. Extra arguments go to pytest.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
-bash scripts/setup.sh
+bash scripts/setup.sh --full
 
 echo "test: cargo test (workspace default members)"
 cargo_rc=0

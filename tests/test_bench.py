@@ -166,6 +166,7 @@ def test_representative_cases_are_drawn_and_logged(textbook_run):
     for kind, there in present.items():
         assert (run / f"case_{kind}.png").exists() == there, kind
     reader = pytest.importorskip("mcap.reader")
+    steps = {}
     with open(run / "cases.mcap", "rb") as fh:
         r = reader.make_reader(fh)
         topics = {c.topic for c in r.get_summary().channels.values()}
@@ -175,6 +176,17 @@ def test_representative_cases_are_drawn_and_logged(textbook_run):
                 msgs = [json.loads(m.data) for _, _, m in r.iter_messages(topics=[f"/{kind}/step"])]
                 assert msgs and {"time", "target", "bullet", "command", "phase"} <= set(msgs[0])
                 assert msgs[-1]["time"] > msgs[0]["time"]
+                steps[kind] = len(msgs)
+                # A log that Foxglove opens: the scene, transforms and poses with the Foxglove
+                # SDK's schemas, every message valid against its schema (tests/foxglove_check.py).
+                assert {f"/{kind}/{t}" for t in ("scene", "tf", "bullet/pose", "target/pose")} <= topics
+    pytest.importorskip("google.protobuf")
+    pytest.importorskip("jsonschema")
+    from foxglove_check import check_recording
+
+    rec = check_recording(run / "cases.mcap")
+    for kind, n in steps.items():
+        assert rec.counts[f"/{kind}/scene"] == n, kind
 
 
 @pytest.mark.parametrize("args, needle", [

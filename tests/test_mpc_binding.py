@@ -29,9 +29,9 @@ def mpc(target_model: str = "4dof") -> _core.CoupledMpc:
 def touching():
     """Bullet c.g. with its front-right corner 4 cm into the target's left rear quarter."""
     p = _core.load_params("full_size")
-    import tomllib
+    from picopit import _toml  # tomllib, or tomli before Python 3.11
 
-    d = tomllib.loads(p)
+    d = _toml.loads(p)
     b, t = d["bullet"], d["target"]
     x = -t["lr"] - 0.3 - b["cg_to_front"]
     y = 0.5 * t["width"] + 0.5 * b["width"] - 0.04

@@ -6,7 +6,6 @@ yardstick scores sanely and that keeps the hard constraints. Skips without casad
 from __future__ import annotations
 
 import sys
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +13,7 @@ import pytest
 
 ca = pytest.importorskip("casadi")
 
-from picopit import _core  # noqa: E402
+from picopit import _core, _toml  # noqa: E402  (_toml: tomllib, or tomli before 3.11)
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks" / "peers"))
@@ -27,7 +26,7 @@ MU = 0.9
 
 @pytest.fixture(scope="module")
 def params():
-    return tomllib.loads(_core.load_params("full_size"))
+    return _toml.loads(_core.load_params("full_size"))
 
 
 def _random_contact(rng):

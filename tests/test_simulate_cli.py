@@ -149,3 +149,22 @@ def test_params_subcommand_lists_and_prints(tmp_path):
     assert proc.returncode == 0 and proc.stdout.split() == ["full_size", "half_scale"]
     proc = run_cli("params", "half_scale", cwd=tmp_path)
     assert proc.returncode == 0 and "[bullet]" in proc.stdout
+
+
+@pytest.mark.parametrize("argv", [["datagen", "--out", "x"], ["train", "--data", "x"], ["compress", "x"],
+                                  ["eval-surrogates", "--data", "x", "--pinn", "y", "--picopinn", "z"]])
+def test_a_command_whose_extra_is_missing_names_the_package_and_the_set_up(monkeypatch, capsys, argv):
+    """The main job's set-up has no torch: the commands that need it say so in one line (exit
+    status 2), and the others, bench among them, still parse."""
+    from picopit import cli
+
+    monkeypatch.setitem(sys.modules, "torch", None)  # `import torch` raises ModuleNotFoundError
+    for mod in ("picopit.train", "picopit.compress", "picopit.surrogate_nn", "picopit.eval_surrogates",
+                "picopit.datagen", "picopit.physics"):
+        monkeypatch.delitem(sys.modules, mod, raising=False)
+    assert cli.build_parser().parse_args(["bench", "--limit", "1"]).command == "bench"
+    rc = cli.main(argv)
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert "needs the Python package 'torch'" in err and "./scripts/setup.sh --full" in err
+    assert "Traceback" not in err

@@ -397,7 +397,7 @@ def test_impulse_timing_is_the_same_motion_and_explains_the_heading(tiny_data):
     """Stepping the plant one integration step at a time to record the impulse centroid τ gives
     the same data bit for bit; τ lies in (0, 1) on contact steps (NaN elsewhere); and knowing
     it turns the trapezoid heading of a contact step, dt·(r + r⁺)/2, into the far closer
-    dt·r + dt·(r⁺ − r)·(1 − τ) (scripts/contact_timing.py measures this at full size)."""
+    dt·r + dt·(r⁺ − r)·(1 − τ)."""
     _, a, man = tiny_data
     cfg = datagen.DatagenConfig.for_params("half_scale", episodes=12, seed=11)
     b, m2 = datagen.generate(cfg, progress=False, impulse_timing=True)
@@ -560,27 +560,3 @@ def test_cli_bad_input_exits_2_naming_the_problem(tmp_path, capsys):
         assert main(["compress", "--teacher", str(tmp_path / "t.safetensors"), "--data", str(tmp_path),
                      "--out", str(tmp_path / "c"), "--output-weights", bad]) == 2
         assert "output_weights" in capsys.readouterr().err
-
-
-def test_contact_timing_script_reports_every_row(tmp_path, capsys):
-    """scripts/contact_timing.py end to end on a tiny run: the JSON holds every row and the
-    timed oracle beats the trapezoid on contact steps; bad arguments exit 2 naming them."""
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[1] / "scripts" / "contact_timing.py"
-    spec = importlib.util.spec_from_file_location("contact_timing", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    out = tmp_path / "ct.json"
-    assert mod.main(["--params", "half_scale", "--episodes", "20", "--seed", "5", "--epochs", "1",
-                     "--json", str(out), "--plot", str(tmp_path / "ct.png")]) == 0
-    r = json.loads(out.read_text())
-    for key in ("oracle_trapezoid", "oracle_timed", "net_features", "net_features_tau"):
-        assert set(r[key]) == {"all_mrad", "contact_mrad", "free_mrad"} and r[key]["all_mrad"] > 0
-    assert r["oracle_timed"]["contact_mrad"] < r["oracle_trapezoid"]["contact_mrad"]
-    assert r["test_contact_samples"] > 0 and (tmp_path / "ct.png").stat().st_size > 0
-    assert "| network on the 11 features |" in capsys.readouterr().out
-    for bad, needle in ((["--params", "quarter_scale"], "--params"), (["--episodes", "3"], "--episodes")):
-        with pytest.raises(SystemExit) as e:
-            mod.main(bad)
-        assert e.value.code == 2 and needle in capsys.readouterr().err

@@ -189,7 +189,7 @@ def test_find_bin_dir_order(tmp_path):
 
 @pytest.mark.skipif(not (RELEASE / "pit-vehicle").exists() or not (RELEASE / "pit-controller").exists(),
                     reason="target/release/pit-vehicle or pit-controller not built "
-                           "(./scripts/setup.sh or cargo build --release -p picopit-vehicle-io --bins)")
+                           "(./scripts/setup.sh --full or cargo build --release -p picopit-vehicle-io --bins)")
 def test_end_to_end_r4(tmp_path, capsys):
     out = tmp_path / "run"
     copy = tmp_path / "copy" / "t.json"

@@ -18,12 +18,17 @@ variables ``[X_0, U_0, X_1, U_1, ..., X_N]`` with the augmented state
 from __future__ import annotations
 
 import math
-import tomllib
+import sys
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Sequence
 
 import casadi as ca
 import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.9 and 3.10: the tomli backport (a picopit dependency there)
+    import tomli as tomllib
 
 GRAVITY = 9.80665
 V_LOW = 0.5  # tyre.rs

@@ -29,11 +29,15 @@ import platform
 import subprocess
 import sys
 import time
-import tomllib
 from pathlib import Path
 from typing import Any, Dict, List
 
 import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.9 and 3.10: the tomli backport (a picopit dependency there)
+    import tomli as tomllib
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))

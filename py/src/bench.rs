@@ -61,7 +61,9 @@ fn trajectory_columns() -> Vec<String> {
 
 /// Run one closed-loop episode: `scenario` is one scenario as JSON text, `config` a preset
 /// name or a JSON configuration, `seed` seeds the sensing noise and actuator errors. With
-/// `record` the result holds the trajectory (one row per control step). The GIL is
+/// `record` the result holds the trajectory (one row per control step) and the upper
+/// layer's plans (`plans`: `time`, `mode`, `push_from`, `push_to`, `push_peak`,
+/// `predicted_heading_error`; empty without `record`). The GIL is
 /// released while the episode runs.
 #[pyfunction]
 #[pyo3(signature = (scenario, config, seed = 0, record = false, models_dir = None))]
@@ -129,6 +131,30 @@ fn run_episode<'py>(
     d.set_item("wall_time", r.wall_time)?;
     d.set_item("plan_times_ms", PyArray1::from_slice(py, &r.plan_times_ms))?;
     d.set_item("ctrl_times_ms", PyArray1::from_slice(py, &r.ctrl_times_ms))?;
+    // The upper layer's plans (recorded with the trajectory): when, the mode, the span of
+    // plan steps with a planned push and its peak normal force, the predicted heading error.
+    let plans = pyo3::types::PyList::empty(py);
+    for p in &r.plans {
+        let dt = p.predicted.get(1).map_or(0.0, |b| b.0 - p.predicted[0].0);
+        let pushed: Vec<_> = p.predicted.iter().filter(|s| s.2[0] > 0.0).collect();
+        let plan = PyDict::new(py);
+        plan.set_item("time", p.time)?;
+        plan.set_item(
+            "mode",
+            serde_json::to_value(p.mode)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_owned)),
+        )?;
+        plan.set_item("push_from", pushed.first().map(|s| s.0))?;
+        plan.set_item("push_to", pushed.last().map(|s| s.0 + dt))?;
+        plan.set_item(
+            "push_peak",
+            pushed.iter().map(|s| s.2[0]).fold(0.0, f64::max),
+        )?;
+        plan.set_item("predicted_heading_error", p.predicted_heading_error)?;
+        plans.append(plan)?;
+    }
+    d.set_item("plans", plans)?;
     if r.trajectory.is_empty() {
         d.set_item("trajectory", py.None())?;
     } else {

@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 mod bench;
 mod models;
 mod mpc;
+mod oracle;
 mod planner;
 mod plant;
 mod sim;
@@ -202,6 +203,41 @@ fn footprint<'py>(
     Ok(PyArray2::from_vec2(py, &rows).expect("rows have equal length"))
 }
 
+/// Where two vehicle footprints overlap (the plant's separating-axis test): a dict with the
+/// world heading `gamma` of the contact normal (from the first vehicle into the second), the
+/// contact `point` `[X, Y]` and the penetration `depth` (m), or `None` when they do not overlap.
+/// Each vehicle is `pose = [X, Y, yaw]` of its c.g. and `size = [length, width, cg_to_front]`.
+#[pyfunction]
+fn footprint_contact<'py>(
+    py: Python<'py>,
+    pose_a: &Bound<'py, PyAny>,
+    size_a: &Bound<'py, PyAny>,
+    pose_b: &Bound<'py, PyAny>,
+    size_b: &Bound<'py, PyAny>,
+) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+    let obb = |pose: &Bound<'py, PyAny>, size: &Bound<'py, PyAny>, who: &str| -> PyResult<Obb> {
+        let p = vec_arg::<3>(pose, &format!("pose_{who}"))?;
+        let s = vec_arg::<3>(size, &format!("size_{who}"))?;
+        let length = positive(s[0], &format!("size_{who}[0] (length)"))?;
+        let width = positive(s[1], &format!("size_{who}[1] (width)"))?;
+        Ok(Obb::vehicle_footprint(
+            &Pose2::new(p[0], p[1], p[2]),
+            length,
+            width,
+            s[2],
+        ))
+    };
+    let (a, b) = (obb(pose_a, size_a, "a")?, obb(pose_b, size_b, "b")?);
+    let Some(c) = dynamics::contact::obb_contact(&a, &b) else {
+        return Ok(None);
+    };
+    let d = pyo3::types::PyDict::new(py);
+    d.set_item("gamma", c.gamma())?;
+    d.set_item("point", vec![c.point.x, c.point.y])?;
+    d.set_item("depth", c.depth)?;
+    Ok(Some(d))
+}
+
 /// Wrap an angle to (−π, π].
 #[pyfunction]
 fn wrap_angle(a: f64) -> f64 {
@@ -214,6 +250,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_params, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_param_sets, m)?)?;
     m.add_function(wrap_pyfunction!(footprint, m)?)?;
+    m.add_function(wrap_pyfunction!(footprint_contact, m)?)?;
     m.add_function(wrap_pyfunction!(wrap_angle, m)?)?;
     m.add("GRAVITY", dynamics::GRAVITY)?;
     plant::register(m)?;
@@ -221,6 +258,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     surrogate::register(m)?;
     mpc::register(m)?;
     sim::register(m)?;
+    oracle::register(m)?;
     planner::register(m)?;
     bench::register(m)?;
     Ok(())

@@ -150,11 +150,50 @@ fn road_poses<'py>(
     Ok(PyArray2::from_vec2(py, &rows).expect("rows have equal length"))
 }
 
+/// Frenet coordinates `[s, d, heading]` (n, 3) of world points `(x[i], y[i])` on a scenario
+/// road (the `road` object as JSON text): the station and lateral offset of the nearest
+/// point of the reference line (m, `d` positive to the left) and the road's heading there.
+#[pyfunction]
+fn road_project<'py>(
+    py: Python<'py>,
+    road: &str,
+    x: Vec<f64>,
+    y: Vec<f64>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let def: RoadDef =
+        serde_json::from_str(road).map_err(|e| ScenarioError::new_err(format!("road: {e}")))?;
+    let built = def.build().map_err(|e| scenario_err(&e))?;
+    if x.len() != y.len() {
+        return Err(PyValueError::new_err(format!(
+            "y: {} values for {} x values",
+            y.len(),
+            x.len()
+        )));
+    }
+    let rows: Vec<Vec<f64>> = x
+        .iter()
+        .zip(&y)
+        .map(|(&xi, &yi)| {
+            if xi.is_finite() && yi.is_finite() {
+                let f = built.project(dynamics::geometry::Vec2::new(xi, yi));
+                vec![f.s, f.d, f.heading]
+            } else {
+                vec![f64::NAN; 3]
+            }
+        })
+        .collect();
+    if rows.is_empty() {
+        return Ok(PyArray2::zeros(py, [0, 3], false));
+    }
+    Ok(PyArray2::from_vec2(py, &rows).expect("rows have equal length"))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ScenarioError", m.py().get_type::<ScenarioError>())?;
     m.add_function(wrap_pyfunction!(load_scenarios, m)?)?;
     m.add_function(wrap_pyfunction!(validate_scenario_line, m)?)?;
     m.add_function(wrap_pyfunction!(screen_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_initial_states, m)?)?;
-    m.add_function(wrap_pyfunction!(road_poses, m)?)
+    m.add_function(wrap_pyfunction!(road_poses, m)?)?;
+    m.add_function(wrap_pyfunction!(road_project, m)?)
 }

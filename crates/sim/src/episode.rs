@@ -495,7 +495,7 @@ pub fn phase_index(p: Phase) -> f64 {
 }
 
 /// One plan of a recorded episode: what the upper layer predicted when it planned, to set
-/// against what then happened (`examples/plan_calibration`).
+/// against what then happened (`picopit trace` lists them).
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct PlanRecord {
     /// When the plan was made (s).

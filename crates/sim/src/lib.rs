@@ -25,8 +25,8 @@ pub use episode::{
     Uncertainty,
 };
 pub use oracle::{
-    ideal_pit, shove_grid, shove_states, DriverView, GridChoice, OracleReport, OracleSettings,
-    ShoveGrid, ShoveState,
+    ideal_pit, oracle_tiers, shove_grid, shove_states, DriverView, GridChoice, OracleReport,
+    OracleSettings, ShoveGrid, ShoveState, TierReport,
 };
 pub use outcome::{FailureCause, JudgeSettings, Metrics, Monitor, Observation, Outcome, Status};
 pub use scenario::{

@@ -609,6 +609,99 @@ pub fn shove_states(
         .collect())
 }
 
+/// The tiers of [`oracle_tiers`], in the order of [`TierReport::tiers`].
+pub const TIERS: [&str; 8] = [
+    "ideal",
+    "robust-t",
+    "robust-v",
+    "robust-tv",
+    "ideal-exp",
+    "held-first",
+    "held-robust",
+    "held-exp",
+];
+
+/// How much of the ideal-PIT bound a controller could reach, in tiers of what it knows and
+/// how precisely it acts ([`oracle_tiers`]).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct TierReport {
+    /// Per tier of [`TIERS`], the chance of success: 0 or 1, or the share of a box that
+    /// succeeds (the `-exp` tiers).
+    pub tiers: [f64; 8],
+    /// Share of the grid's shoves that succeed in the truth.
+    pub true_share: f64,
+    /// Share that succeed with the driver's command held from the shove on.
+    pub held_share: f64,
+    /// Earliest time the bullet can be at the PIT pose (s).
+    pub t_reach: f64,
+    /// Shoves per grid.
+    pub shoves: usize,
+}
+
+/// The tiers of one scenario from its two grids, each choice made in its world and judged
+/// in the truth (`truth`: the driver's own law; `held`: its command held from the shove on):
+///
+/// * `ideal`: some shove succeeds (the ideal-PIT bound);
+/// * `robust-t`, `robust-v`, `robust-tv`: some shove succeeds together with its neighbours
+///   ±1 time step, ±1 size step, or both (a 3 × 3 box): the bound for a controller whose
+///   push lands that far off;
+/// * `ideal-exp`: the best expected success if the push lands anywhere in the 3 × 3 box of
+///   the chosen shove, equally likely, the choice made with the truth;
+/// * `held-first`: the earliest shove that succeeds under the held command, judged true;
+/// * `held-robust`: the shove with the most successes in its 3 × 3 box under the held
+///   command, judged true;
+/// * `held-exp`: that choice's expected true success when the push lands anywhere in its box.
+#[must_use]
+pub fn tiers(truth: &ShoveGrid, held: &ShoveGrid) -> [f64; 8] {
+    let whole = |rt: usize, rv: usize| {
+        f64::from(u8::from(
+            truth.most_robust(rt, rv).is_some_and(|c| c.score == c.of),
+        ))
+    };
+    let at = |c: Option<GridChoice>| {
+        f64::from(u8::from(c.is_some_and(|c| {
+            truth.get(c.time as isize, c.side, c.shove as isize)
+        })))
+    };
+    let expected = |c: Option<GridChoice>| {
+        c.map_or(0.0, |c| {
+            truth.box_score(c.time, c.side, c.shove, 1, 1) as f64 / 9.0
+        })
+    };
+    let pick = held.most_robust(1, 1);
+    let best = truth.most_robust(1, 1);
+    [
+        at(truth.earliest()),
+        whole(1, 0),
+        whole(0, 1),
+        f64::from(u8::from(best.is_some_and(|c| c.score == c.of))),
+        best.map_or(0.0, |c| c.score as f64 / c.of as f64),
+        at(held.earliest()),
+        at(pick),
+        expected(pick),
+    ]
+}
+
+/// The whole grid of single shoves on one scenario, simulated with the driver's true law and
+/// with its command held ([`shove_grid`] in both [`DriverView`]s), and the [`tiers`].
+///
+/// # Errors
+/// As [`ideal_pit`].
+pub fn oracle_tiers(sc: &Scenario, settings: &OracleSettings) -> Result<TierReport, ScenarioError> {
+    let truth = shove_grid(sc, settings, DriverView::True)?;
+    let held = shove_grid(sc, settings, DriverView::Held)?;
+    let share = |g: &ShoveGrid| {
+        g.success.iter().filter(|&&b| b).count() as f64 / g.success.len().max(1) as f64
+    };
+    Ok(TierReport {
+        tiers: tiers(&truth, &held),
+        true_share: share(&truth),
+        held_share: share(&held),
+        t_reach: truth.t_reach,
+        shoves: truth.success.len(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -668,5 +761,23 @@ mod tests {
         assert_eq!((c.time, c.shove, c.score, c.of), (2, 0, 3, 18));
         let one = ShoveGrid::most_robust_over(std::slice::from_ref(&a), 1, 1);
         assert_eq!(one, a.most_robust(1, 1));
+    }
+
+    #[test]
+    fn tiers_judge_each_choice_in_the_truth() {
+        let truth = grid(["..x", "xxx", "xxx", "x.."]);
+        // The held view believes only the last time's first size works, which is true.
+        let held = grid(["...", "...", "...", "x.."]);
+        let t = tiers(&truth, &held);
+        // ideal; robust-t (the last size, times 0-2), robust-v (a full row), robust-tv
+        // (no full 3 x 3 box: 7 of 9 at best); ideal-exp 7/9; held-first true; held-robust
+        // the same shove; its box (times 2-3, sizes 0-1, outside counted as failing) 3/9.
+        assert_eq!(t[..4], [1.0, 1.0, 1.0, 0.0]);
+        assert!((t[4] - 7.0 / 9.0).abs() < 1e-12);
+        assert_eq!(t[5..7], [1.0, 1.0]);
+        assert!((t[7] - 3.0 / 9.0).abs() < 1e-12, "{t:?}");
+        // A held view that picks a shove failing in truth scores nothing.
+        let wrong = grid(["x..", "...", "...", "..."]);
+        assert_eq!(tiers(&truth, &wrong)[5..], [0.0, 0.0, 2.0 / 9.0]);
     }
 }

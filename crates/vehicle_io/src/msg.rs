@@ -55,6 +55,15 @@ pub struct StateEstimate {
     pub target_input: [f64; 2],
     /// The bullet command in force when the states were measured: `[δ_f, T_r]`.
     pub bullet_applied: [f64; 2],
+    /// The bullet–target contact force `[F_n, F_t]` on the target in the contact frame (N),
+    /// the mean over the period before publication (not delayed); zero apart. A simulator
+    /// knows it; a car without a force sensor leaves it zero. Recorded and drawn, never used
+    /// by the controller.
+    pub contact_force: [f64; 2],
+    /// World heading γ of the contact normal (bullet into target; rad; 0 apart).
+    pub contact_gamma: f64,
+    /// The contact point in the target's body frame, relative to its c.g. (m; 0 apart).
+    pub contact_point: [f64; 2],
     /// `STATE_*` bits.
     pub flags: u32,
     /// Number of commands the vehicle side has applied so far (saturating).

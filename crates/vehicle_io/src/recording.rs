@@ -1,5 +1,6 @@
 //! Glue between the binaries and the MCAP recorder ([`crate::record`]): the scene metadata
-//! (vehicle boxes, the road's edges and centre line) from the scenario.
+//! (vehicle boxes, the road's edges and centre line, the obstacles, the contact arrow's scale)
+//! from the scenario.
 
 use crate::ports::ServiceNames;
 use crate::record::{RecordMeta, Recorder, RoadLines, VehicleBox};
@@ -13,6 +14,7 @@ fn vehicle_box(p: &VehicleParams) -> VehicleBox {
         length: p.length,
         width: p.width,
         height: p.height,
+        cg_to_front: p.cg_to_front,
     }
 }
 
@@ -51,7 +53,11 @@ pub fn start(
     params: &ParamSet,
     process: &str,
 ) -> Result<Recorder, String> {
+    // A contact force equal to the target's weight draws as long as the target.
+    let weight = params.target.mass * dynamics::GRAVITY;
     let mut meta = RecordMeta::new(vehicle_box(&params.bullet), vehicle_box(&params.target))
+        .with_obstacles(sc.obstacles())
+        .with_contact_arrow_scale(params.target.length / weight)
         .with_entry("process", process)
         .with_entry("scenario", sc.id.as_str())
         .with_entry("params", sc.params.name())

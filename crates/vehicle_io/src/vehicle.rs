@@ -4,6 +4,7 @@
 
 use crate::msg::{ActuatorCommand, CommandMode, StateEstimate, STATE_CONTACT, STATE_SAFE_STOP};
 use dynamics::bullet::{brake_along_road, BulletState};
+use dynamics::ContactInput;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
@@ -17,8 +18,8 @@ pub trait VehicleBridge {
     /// The vehicle clock: nanoseconds since the run started.
     fn now_ns(&self) -> u64;
     /// The newest state estimate: fill `target`, `bullet`, `target_input`,
-    /// `bullet_applied`, `stamp_ns` (measurement time) and the `STATE_CONTACT` flag; the
-    /// caller fills sequence numbers and send stamps.
+    /// `bullet_applied`, `stamp_ns` (measurement time), the `STATE_CONTACT` flag and, when
+    /// known, the `contact_*` fields; the caller fills sequence numbers and send stamps.
     fn measure(&mut self, out: &mut StateEstimate);
     /// Request steer (rad) and rear-axle torque (N·m, negative brakes).
     fn actuate(&mut self, steer: f64, torque: f64);
@@ -128,6 +129,10 @@ impl VehicleBridge for SimBridge {
         if self.sim.plant().contact().is_some() {
             out.flags |= STATE_CONTACT;
         }
+        let c = self.sim.contact().unwrap_or_else(ContactInput::none);
+        out.contact_force = [c.fc.x, c.fc.y];
+        out.contact_gamma = c.gamma;
+        out.contact_point = [c.point_in_body.x, c.point_in_body.y];
     }
 
     fn actuate(&mut self, steer: f64, torque: f64) {

@@ -1,6 +1,8 @@
 //! End to end over iceoryx2: both binaries as processes, on the lock-step simulated clock.
 //!
-//! - a lock-step run over IPC equals the in-process episode (same noise, same judge);
+//! - a lock-step run over IPC equals the in-process episode (same noise, same judge), and
+//!   both processes' recordings are valid message for message against their schemas (the
+//!   Foxglove SDK's for the scene, transforms and poses), with the contact drawn;
 //! - killing the controller mid-run: the vehicle stops itself inside the road, and the
 //!   controller's recording reads to its last message;
 //! - a stall of the state stream: the controller falls back while the states are stale and
@@ -11,6 +13,7 @@
 
 mod common;
 
+use common::schema_check::check_recording;
 use common::{count_messages, json, root, wait, HALF, TRIALS};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -73,6 +76,8 @@ fn run_pair(
 fn a_lock_step_run_over_ipc_equals_the_in_process_episode() {
     // R4 with the paper platform's sensing noise and a 50 ms latency, seed 2; the
     // in-process runner does not compensate delays, so neither does the controller here.
+    let dir = out_dir("parity");
+    let (vm, cm) = (dir.join("vehicle.mcap"), dir.join("controller.mcap"));
     let (v, c) = run_pair(
         "parity",
         "R4",
@@ -85,8 +90,10 @@ fn a_lock_step_run_over_ipc_equals_the_in_process_episode() {
             "2",
             "--lockstep-timeout",
             "30",
+            "--record",
+            vm.to_str().unwrap(),
         ],
-        &["--no-delay-compensation"],
+        &["--no-delay-compensation", "--record", cm.to_str().unwrap()],
     );
     assert_eq!(v["ending"], "finished", "{v}");
     assert_eq!(c["ending"], "finished", "{c}");
@@ -107,6 +114,47 @@ fn a_lock_step_run_over_ipc_equals_the_in_process_episode() {
     let r = sim::run_episode(&sc, &cfg, 2).unwrap();
     let m = serde_json::to_value(r.metrics).unwrap();
     assert_eq!(v["metrics"], m, "IPC {} vs in process {}", v["metrics"], m);
+
+    // Both recordings: every message valid against its schema; every state drawn; the push
+    // shows as a contact arrow on /scene and as force on /contact.
+    for path in [&vm, &cm] {
+        let rec = check_recording(&std::fs::read(path).unwrap());
+        let states = rec.counts["/state"];
+        assert!(states > 50, "{}: {:?}", path.display(), rec.counts);
+        for t in [
+            "/scene",
+            "/tf",
+            "/bullet/pose",
+            "/target/pose",
+            "/bullet/state",
+            "/contact",
+        ] {
+            assert_eq!(rec.counts[t], states, "{}: {t}", path.display());
+        }
+        let arrows = rec
+            .scenes
+            .iter()
+            .filter(|s| {
+                s.entities
+                    .iter()
+                    .any(|e| e.id == "contact" && !e.arrows.is_empty())
+            })
+            .count();
+        let pushing = rec.json["/contact"]
+            .iter()
+            .filter(|c| c["normal_force"].as_f64().unwrap() > 0.0)
+            .count();
+        assert!(
+            arrows > 0 && arrows == pushing,
+            "{}: {arrows} arrows, {pushing} pushes",
+            path.display()
+        );
+        assert!(rec.scenes[0]
+            .entities
+            .iter()
+            .any(|e| e.id == "road" && e.lines.len() == 3));
+        assert_eq!(rec.counts["/road"], 1, "{}", path.display());
+    }
 }
 
 #[test]

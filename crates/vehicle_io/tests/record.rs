@@ -1,9 +1,15 @@
-//! The MCAP recorder: every sample on every topic, Foxglove schemas, and a file that survives
-//! SIGKILL up to its last flush.
+//! The MCAP recorder: every sample on every topic, every message valid against its schema
+//! (the Foxglove SDK's for the scene, transforms and poses), and a file that survives SIGKILL
+//! up to its last flush.
 
 // `..Default::default()` keeps the fixtures compiling as the payloads grow fields.
 #![allow(clippy::needless_update)]
 
+mod common;
+
+use common::schema_check::check_recording;
+use dynamics::road::Obstacle;
+use foxglove::messages::{FrameTransforms, PoseInFrame, Quaternion, SceneUpdate};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
 use mcap::records::Record;
@@ -18,7 +24,13 @@ use vehicle_io::msg::{
     ActuatorCommand, ControllerStatus, Heartbeat, StateEstimate, PEER_CONTROLLER, PEER_VEHICLE,
 };
 use vehicle_io::ports::{self, ServiceNames, Svc};
+use vehicle_io::record::scene::entity;
 use vehicle_io::record::{topic, RecordMeta, Recorder, RoadLines, VehicleBox};
+
+/// Messages per published state: the raw `/state` and the derived topics.
+const PER_STATE: u64 = 8;
+/// Messages per sample `k` on every topic ([`Pubs::publish`]).
+const PER_K: u64 = PER_STATE + 4;
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
 
@@ -43,11 +55,13 @@ fn meta() -> RecordMeta {
             length: 4.5,
             width: 1.75,
             height: 1.5,
+            cg_to_front: 2.5,
         },
         VehicleBox {
             length: 5.0,
             width: 2.0,
             height: 1.25,
+            cg_to_front: 2.0,
         },
     )
     .with_road(RoadLines {
@@ -55,6 +69,27 @@ fn meta() -> RecordMeta {
         right: vec![[0.0, -5.5], [200.0, -5.5]],
         centre: vec![[0.0, 0.0], [100.0, 0.0], [200.0, 0.0]],
     })
+    .with_obstacles(vec![
+        Obstacle {
+            x: 80.0,
+            y: 3.5,
+            heading: 0.0,
+            vx: 0.0,
+            vy: 0.0,
+            length: 4.0,
+            width: 1.8,
+        },
+        Obstacle {
+            x: 120.0,
+            y: -3.5,
+            heading: 0.1,
+            vx: 10.0,
+            vy: 0.5,
+            length: 4.5,
+            width: 1.9,
+        },
+    ])
+    .with_contact_arrow_scale(1e-3)
     .with_entry("scenario", "unit-test")
     .with_entry("git_commit", "0000000")
 }
@@ -73,6 +108,15 @@ fn state(k: u64) -> StateEstimate {
         bullet_applied: [0.0625, -50.0],
         flags: (k % 3) as u32,
         commands_applied: k as u32,
+        run_start_ns: 10_000_000,
+        // In contact on every second sample: a force of 1 kN + 125 N k.
+        contact_force: if k % 2 == 1 {
+            [1000.0 + 1000.0 * f, -250.0]
+        } else {
+            [0.0; 2]
+        },
+        contact_gamma: if k % 2 == 1 { -1.5 } else { 0.0 },
+        contact_point: if k % 2 == 1 { [-1.5, 0.875] } else { [0.0; 2] },
         ..StateEstimate::default()
     }
 }
@@ -174,9 +218,10 @@ fn stream(bytes: &[u8]) -> (Vec<mcap::Message<'static>>, bool) {
     (out, false)
 }
 
+/// The JSON messages per topic (the Foxglove topics are protobuf and left out).
 fn by_topic(msgs: &[mcap::Message<'static>]) -> BTreeMap<String, Vec<serde_json::Value>> {
     let mut map: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
-    for m in msgs {
+    for m in msgs.iter().filter(|m| m.channel.message_encoding == "json") {
         map.entry(m.channel.topic.clone())
             .or_default()
             .push(serde_json::from_slice(&m.data).unwrap());
@@ -184,16 +229,26 @@ fn by_topic(msgs: &[mcap::Message<'static>]) -> BTreeMap<String, Vec<serde_json:
     map
 }
 
-fn yaw_of(q: &serde_json::Value) -> f64 {
-    let z = q["z"].as_f64().unwrap();
-    let w = q["w"].as_f64().unwrap();
-    assert_eq!(q["x"].as_f64(), Some(0.0));
-    assert_eq!(q["y"].as_f64(), Some(0.0));
-    2.0 * z.atan2(w)
+/// The decoded Foxglove messages of `topic`.
+fn decoded<T: prost::Message + Default>(msgs: &[mcap::Message<'static>], topic: &str) -> Vec<T> {
+    msgs.iter()
+        .filter(|m| m.channel.topic == topic)
+        .map(|m| T::decode(&m.data[..]).unwrap())
+        .collect()
+}
+
+fn yaw_of(q: Option<Quaternion>) -> f64 {
+    let q = q.unwrap();
+    assert_eq!((q.x, q.y), (0.0, 0.0));
+    2.0 * q.z.atan2(q.w)
 }
 
 fn wrap(a: f64) -> f64 {
     (a + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI
+}
+
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() < 1e-9
 }
 
 #[test]
@@ -211,41 +266,45 @@ fn records_every_topic_with_schemas_and_round_trips() {
     }
     let stats = rec.stop().unwrap();
     for t in topic::ALL {
-        assert_eq!(stats.count(t), N, "{t}: {stats:?}");
+        let n = if t == topic::ROAD { 1 } else { N };
+        assert_eq!(stats.count(t), n, "{t}: {stats:?}");
     }
-    assert_eq!(stats.total(), 8 * N);
+    assert_eq!(stats.total(), PER_K * N + 1);
     assert!(stats.seq_gaps.values().all(|&g| g == 0), "{stats:?}");
 
     let bytes = std::fs::read(&path).unwrap();
     // A finished file: the footer and summary are there.
     let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
-    assert_eq!(summary.stats.as_ref().unwrap().message_count, 8 * N);
+    assert_eq!(summary.stats.as_ref().unwrap().message_count, PER_K * N + 1);
     let (msgs, err) = stream(&bytes);
     assert!(!err, "a finished file streams to its end");
-    assert_eq!(msgs.len() as u64, 8 * N);
+    assert_eq!(msgs.len() as u64, PER_K * N + 1);
+
+    // Every message is valid against its channel's schema; the Foxglove ones are the SDK's.
+    let checked = check_recording(&bytes);
+    assert_eq!(checked.counts.len(), topic::ALL.len());
+    for m in &msgs {
+        let schema = m.channel.schema.as_ref().expect("a schema");
+        let (name, encoding) = match m.channel.topic.as_str() {
+            topic::STATE => ("picopit.StateEstimate", "json"),
+            topic::COMMAND => ("picopit.ActuatorCommand", "json"),
+            topic::STATUS => ("picopit.ControllerStatus", "json"),
+            topic::HEARTBEAT_CONTROLLER | topic::HEARTBEAT_VEHICLE => ("picopit.Heartbeat", "json"),
+            topic::SCENE => ("foxglove.SceneUpdate", "protobuf"),
+            topic::TF => ("foxglove.FrameTransforms", "protobuf"),
+            topic::BULLET_POSE | topic::TARGET_POSE => ("foxglove.PoseInFrame", "protobuf"),
+            topic::BULLET_STATE => ("picopit.BulletPlot", "json"),
+            topic::TARGET_STATE => ("picopit.TargetPlot", "json"),
+            topic::CONTACT => ("picopit.Contact", "json"),
+            topic::ROAD => ("picopit.Road", "json"),
+            other => panic!("unexpected topic {other}"),
+        };
+        assert_eq!(schema.name, name, "{}", m.channel.topic);
+        assert_eq!(m.channel.message_encoding, encoding, "{}", m.channel.topic);
+    }
 
     // Log times are monotonic; publish times are the vehicle stamps.
     assert!(msgs.windows(2).all(|w| w[0].log_time <= w[1].log_time));
-    for m in &msgs {
-        assert_eq!(m.channel.message_encoding, "json");
-        let schema = m
-            .channel
-            .schema
-            .as_ref()
-            .expect("every channel has a schema");
-        assert_eq!(schema.encoding, "jsonschema");
-        let _: serde_json::Value = serde_json::from_slice(&schema.data).unwrap();
-        let expected = match m.channel.topic.as_str() {
-            topic::STATE => "picopit.StateEstimate",
-            topic::COMMAND => "picopit.ActuatorCommand",
-            topic::STATUS => "picopit.ControllerStatus",
-            topic::HEARTBEAT_CONTROLLER | topic::HEARTBEAT_VEHICLE => "picopit.Heartbeat",
-            topic::SCENE => "foxglove.SceneUpdate",
-            topic::BULLET_POSE | topic::TARGET_POSE => "foxglove.PoseInFrame",
-            other => panic!("unexpected topic {other}"),
-        };
-        assert_eq!(schema.name, expected, "{}", m.channel.topic);
-    }
     let states: Vec<_> = msgs
         .iter()
         .filter(|m| m.channel.topic == topic::STATE)
@@ -255,8 +314,18 @@ fn records_every_topic_with_schemas_and_round_trips() {
         assert_eq!(m.sequence as usize, k);
     }
 
-    // The raw payloads decode back to the values sent.
+    // The road, once, first: the polylines as given.
     let t = by_topic(&msgs);
+    assert_eq!(msgs[0].channel.topic, topic::ROAD);
+    let road = &t[topic::ROAD][0];
+    assert_eq!(road["left"], serde_json::json!([[0.0, 5.5], [200.0, 5.5]]));
+    assert_eq!(road["centre"].as_array().unwrap().len(), 3);
+
+    // The raw payloads decode back to the values sent.
+    let scenes: Vec<SceneUpdate> = decoded(&msgs, topic::SCENE);
+    let tfs: Vec<FrameTransforms> = decoded(&msgs, topic::TF);
+    let bullet_poses: Vec<PoseInFrame> = decoded(&msgs, topic::BULLET_POSE);
+    let target_poses: Vec<PoseInFrame> = decoded(&msgs, topic::TARGET_POSE);
     for k in 0..N as usize {
         let ku = k as u64;
         let s: StateEstimate = serde_json::from_value(t[topic::STATE][k].clone()).unwrap();
@@ -271,69 +340,130 @@ fn records_every_topic_with_schemas_and_round_trips() {
         let h: Heartbeat = serde_json::from_value(t[topic::HEARTBEAT_VEHICLE][k].clone()).unwrap();
         assert_eq!(h, heartbeat(ku, PEER_VEHICLE));
 
-        // Poses: position and yaw of each vehicle, in frame `world`, stamped with stamp_ns.
+        // Poses and transforms: position and yaw of each vehicle, in frame `world`, stamped
+        // with stamp_ns.
         let s = state(ku);
-        for (tp, x, y, psi) in [
-            (topic::BULLET_POSE, s.bullet[0], s.bullet[1], s.bullet[2]),
-            (topic::TARGET_POSE, s.target[6], s.target[7], s.target[2]),
-        ] {
-            let p = &t[tp][k];
-            assert_eq!(p["frame_id"], "world");
+        let (sec, nsec) = (
+            (s.stamp_ns / 1_000_000_000) as u32,
+            (s.stamp_ns % 1_000_000_000) as u32,
+        );
+        let bullet = (s.bullet[0], s.bullet[1], s.bullet[2]);
+        let target = (s.target[6], s.target[7], s.target[2]);
+        for (p, (x, y, psi)) in [(&bullet_poses[k], bullet), (&target_poses[k], target)] {
+            assert_eq!(p.frame_id, "world");
+            let ts = p.timestamp.unwrap();
+            assert_eq!((ts.sec(), ts.nsec()), (sec, nsec));
+            let pose = p.pose.unwrap();
+            let pos = pose.position.unwrap();
+            assert_eq!((pos.x, pos.y), (x, y));
+            assert!(wrap(yaw_of(pose.orientation) - psi).abs() < 1e-12);
+        }
+        let tf = &tfs[k].transforms;
+        assert_eq!(tf.len(), 2);
+        for (f, child, (x, y, psi)) in [(&tf[0], "bullet", bullet), (&tf[1], "target", target)] {
             assert_eq!(
-                p["timestamp"]["sec"].as_u64(),
-                Some(s.stamp_ns / 1_000_000_000)
+                (f.parent_frame_id.as_str(), f.child_frame_id.as_str()),
+                ("world", child)
             );
-            assert_eq!(
-                p["timestamp"]["nsec"].as_u64(),
-                Some(s.stamp_ns % 1_000_000_000)
-            );
-            assert_eq!(p["pose"]["position"]["x"].as_f64(), Some(x));
-            assert_eq!(p["pose"]["position"]["y"].as_f64(), Some(y));
-            assert!(wrap(yaw_of(&p["pose"]["orientation"]) - psi).abs() < 1e-12);
+            let tr = f.translation.unwrap();
+            assert_eq!((tr.x, tr.y), (x, y));
+            assert!(wrap(yaw_of(f.rotation) - psi).abs() < 1e-12);
         }
 
-        // The scene: one cube per vehicle of its size at its pose; the road on the first.
-        let scene = &t[topic::SCENE][k];
-        let entities = scene["entities"].as_array().unwrap();
-        let ids: Vec<_> = entities.iter().map(|e| e["id"].as_str().unwrap()).collect();
+        // The plot topics: named fields of the same state.
+        let b = &t[topic::BULLET_STATE][k];
+        assert_eq!(b["speed"].as_f64(), Some(s.bullet[3].hypot(s.bullet[4])));
+        assert_eq!(b["yaw_rate"].as_f64(), Some(s.bullet[5]));
+        assert_eq!(b["torque"].as_f64(), Some(s.bullet_applied[1]));
+        let tp = &t[topic::TARGET_STATE][k];
+        assert_eq!(tp["yaw"].as_f64(), Some(s.target[2]));
+        assert_eq!(tp["roll"].as_f64(), Some(s.target[5]));
+        assert_eq!(tp["brake_torque"].as_f64(), Some(s.target_input[1]));
+        assert_eq!(tp["timestamp"]["nsec"].as_u64(), Some(u64::from(nsec)));
+        let c = &t[topic::CONTACT][k];
+        assert_eq!(c["normal_force"].as_f64(), Some(s.contact_force[0]));
+        assert_eq!(
+            c["force"].as_f64(),
+            Some(s.contact_force[0].hypot(s.contact_force[1]))
+        );
+        assert_eq!(c["in_contact"], serde_json::json!(s.flags & 2 != 0));
+
+        // The scene: one cube per vehicle of its size at its pose, the contact, the obstacles
+        // where they are at scenario time, and the road on the first.
+        let entities = &scenes[k].entities;
+        let ids: Vec<_> = entities.iter().map(|e| e.id.as_str()).collect();
+        let mut expected = vec![
+            entity::BULLET,
+            entity::TARGET,
+            entity::CONTACT,
+            "obstacle/0",
+            "obstacle/1",
+        ];
         if k == 0 {
-            assert_eq!(ids, ["bullet", "target", "road"]);
-            let lines = entities[2]["lines"].as_array().unwrap();
+            expected.push(entity::ROAD);
+            let lines = &entities[5].lines;
             assert_eq!(lines.len(), 3);
-            assert_eq!(lines[2]["points"].as_array().unwrap().len(), 3);
-            assert_eq!(lines[0]["type"], 0);
-        } else {
-            assert_eq!(ids, ["bullet", "target"]);
+            assert_eq!(lines[2].points.len(), 3);
+            assert_eq!(lines[0].r#type, 0);
+            assert_eq!(lines[0].points[1].y, 5.5);
         }
-        for (e, b, psi, x, y) in [
-            (
-                &entities[0],
-                meta().bullet,
-                s.bullet[2],
-                s.bullet[0],
-                s.bullet[1],
-            ),
-            (
-                &entities[1],
-                meta().target,
-                s.target[2],
-                s.target[6],
-                s.target[7],
-            ),
+        assert_eq!(ids, expected);
+        for (e, b, (x, y, psi)) in [
+            (&entities[0], meta().bullet, bullet),
+            (&entities[1], meta().target, target),
         ] {
-            assert_eq!(e["frame_id"], "world");
-            let cube = &e["cubes"][0];
-            assert_eq!(cube["size"]["x"].as_f64(), Some(b.length));
-            assert_eq!(cube["size"]["y"].as_f64(), Some(b.width));
-            assert_eq!(cube["size"]["z"].as_f64(), Some(b.height));
-            assert!((cube["pose"]["position"]["x"].as_f64().unwrap() - x).abs() < 1e-12);
-            assert!((cube["pose"]["position"]["y"].as_f64().unwrap() - y).abs() < 1e-12);
-            assert_eq!(cube["pose"]["position"]["z"].as_f64(), Some(0.5 * b.height));
-            assert!(wrap(yaw_of(&cube["pose"]["orientation"]) - psi).abs() < 1e-12);
-            for key in ["arrows", "spheres", "cylinders", "triangles", "models"] {
-                assert_eq!(e[key], serde_json::json!([]), "{key}");
-            }
+            assert_eq!(e.frame_id, "world");
+            let cube = &e.cubes[0];
+            let size = cube.size.unwrap();
+            assert_eq!((size.x, size.y, size.z), (b.length, b.width, b.height));
+            let pose = cube.pose.unwrap();
+            let pos = pose.position.unwrap();
+            // Centred on the footprint: cg_to_front − length/2 ahead of the c.g.
+            let ahead = b.cg_to_front - 0.5 * b.length;
+            let (cx, cy) = (x + ahead * psi.cos(), y + ahead * psi.sin());
+            assert!(close(pos.x, cx) && close(pos.y, cy), "{pos:?}");
+            assert_eq!(pos.z, 0.5 * b.height);
+            assert!(wrap(yaw_of(pose.orientation) - psi).abs() < 1e-12);
+            assert_eq!(e.texts.len(), 1);
         }
+        // The contact arrow: drawn in contact only, pointing along R(γ) f_c, its head at the
+        // contact point (target body frame → world), 1 mm per N long.
+        let arrows = &entities[2].arrows;
+        if s.contact_force[0] > 0.0 {
+            assert_eq!(arrows.len(), 1, "k = {k}");
+            let a = arrows[0];
+            let pose = a.pose.unwrap();
+            let f = s.contact_force;
+            let g = s.contact_gamma;
+            let fw = (
+                f[0] * g.cos() - f[1] * g.sin(),
+                f[0] * g.sin() + f[1] * g.cos(),
+            );
+            let heading = yaw_of(pose.orientation);
+            assert!(wrap(heading - fw.1.atan2(fw.0)).abs() < 1e-9);
+            let len = a.shaft_length + a.head_length;
+            assert!(close(len, f[0].hypot(f[1]) * 1e-3));
+            let tail = pose.position.unwrap();
+            let (sn, cs) = s.target[2].sin_cos();
+            let [px, py] = s.contact_point;
+            let point = (
+                s.target[6] + cs * px - sn * py,
+                s.target[7] + sn * px + cs * py,
+            );
+            assert!(close(tail.x + len * heading.cos(), point.0));
+            assert!(close(tail.y + len * heading.sin(), point.1));
+        } else {
+            assert!(arrows.is_empty(), "k = {k}");
+        }
+        // The moving obstacle at t = stamp − run start.
+        let tt = s.stamp_ns.saturating_sub(s.run_start_ns) as f64 * 1e-9;
+        let ob = entities[4].cubes[0].pose.unwrap().position.unwrap();
+        assert!(
+            close(ob.x, 120.0 + 10.0 * tt) && close(ob.y, -3.5 + 0.5 * tt),
+            "{ob:?}"
+        );
+        let ob0 = entities[3].cubes[0].pose.unwrap().position.unwrap();
+        assert_eq!((ob0.x, ob0.y), (80.0, 3.5));
     }
 
     // The Metadata record carries the boxes and the caller's entries.
@@ -351,6 +481,7 @@ fn records_every_topic_with_schemas_and_round_trips() {
     assert_eq!(md["git_commit"], "0000000");
     assert_eq!(md["bullet.length"], "4.5");
     assert_eq!(md["target.width"], "2");
+    assert_eq!(md["recorder.obstacles"], "2");
     assert_eq!(md["service.state"], names.state);
     // PICOPIT_RECORD_KEEP=DIR keeps a copy (e.g. to try `picopit replay` or Foxglove on it).
     if let Ok(dir) = std::env::var("PICOPIT_RECORD_KEEP") {
@@ -374,7 +505,7 @@ fn drop_without_stop_finishes_the_file() {
     let (msgs, err) = stream(&bytes);
     assert!(!err);
     // No road: the scene is still written.
-    assert_eq!(msgs.len(), 5 * 8);
+    assert_eq!(msgs.len() as u64, 5 * PER_K);
     let _ = std::fs::remove_file(&path);
 }
 
@@ -418,12 +549,12 @@ fn unfinished_and_truncated_files_stream_up_to_the_last_flushed_message() {
     for k in 0..N {
         pubs.publish(k);
     }
-    wait_flushed(&path, (8 * N) as usize);
+    wait_flushed(&path, (PER_K * N + 1) as usize);
     // Copy the file mid-run: exactly what a killed process leaves behind.
     let bytes = std::fs::read(&path).unwrap();
     assert!(mcap::Summary::read(&bytes).is_err() || mcap::Summary::read(&bytes).unwrap().is_none());
     let (msgs, _) = stream(&bytes);
-    assert_eq!(msgs.len() as u64, 8 * N);
+    assert_eq!(msgs.len() as u64, PER_K * N + 1);
     let t = by_topic(&msgs);
     for k in 0..N as usize {
         let s: StateEstimate = serde_json::from_value(t[topic::STATE][k].clone()).unwrap();
@@ -457,7 +588,7 @@ fn crash_child() {
     for k in 0..12 {
         pubs.publish(k);
     }
-    wait_flushed(Path::new(path), 12 * 8);
+    wait_flushed(Path::new(path), 12 * PER_K as usize + 1);
     println!("FLUSHED");
     std::thread::sleep(Duration::from_secs(120));
     drop(rec);
@@ -482,7 +613,7 @@ fn sigkill_leaves_a_readable_file() {
 
     let bytes = std::fs::read(&path).unwrap();
     let (msgs, _) = stream(&bytes);
-    assert_eq!(msgs.len(), 12 * 8);
+    assert_eq!(msgs.len(), 12 * PER_K as usize + 1);
     let t = by_topic(&msgs);
     let s: StateEstimate = serde_json::from_value(t[topic::STATE][11].clone()).unwrap();
     assert_eq!(s, state(11));

@@ -37,6 +37,12 @@ def footprint(pose: _ArrayLike, length: float, width: float, cg_to_front: float)
     """Corners (4, 2) of a vehicle footprint with its c.g. at ``pose = [X, Y, yaw]``,
     counter-clockwise from front-left."""
 
+def footprint_contact(pose_a: _ArrayLike, size_a: _ArrayLike, pose_b: _ArrayLike,
+                      size_b: _ArrayLike) -> Optional[Dict[str, Any]]:
+    """Where two vehicle footprints overlap (the plant's separating-axis test):
+    ``{"gamma": world heading of the normal from a into b, "point": [X, Y], "depth": m}``,
+    or None apart. ``pose = [X, Y, yaw]`` of the c.g., ``size = [length, width, cg_to_front]``."""
+
 def wrap_angle(a: float) -> float:
     """Wrap an angle to (-pi, pi]."""
 
@@ -394,6 +400,24 @@ def scenario_initial_states(text: str) -> InitialStates: ...
 def road_poses(road: str, s: _ArrayLike, d: Optional[_ArrayLike] = None) -> _F64:
     """(n, 3) ``[x, y, heading]`` of a scenario road (JSON of its ``road`` object) at
     stations ``s``, offset laterally by ``d``."""
+def road_project(road: str, x: Sequence[float], y: Sequence[float]) -> _F64:
+    """(n, 3) Frenet ``[s, d, heading]`` of world points on a scenario road (JSON of its
+    ``road`` object): station and lateral offset (left positive) of the nearest reference-line
+    point, and the road's heading there (NaN rows for non-finite points)."""
+
+# --- the ideal-PIT bound (crates/sim oracle) -----------------------------------------------
+
+def oracle_settings(settings_json: Optional[str] = None) -> Dict[str, Any]:
+    """The oracle's settings (JSON over the defaults) resolved and validated; ScenarioError
+    names a bad field."""
+def ideal_pit(scenario: str, settings_json: Optional[str] = None) -> Dict[str, Any]:
+    """The ideal-PIT bound on one scenario (JSON): ``feasible``, ``shove`` (``time``, ``side``,
+    ``dv``, ``decided_at``, ``at_rest``; None), ``t_reach``, ``tried``, ``successes``,
+    ``alone_fails_at`` (the GIL is released)."""
+def oracle_tier_names() -> List[str]: ...
+def oracle_tiers(scenario: str, settings_json: Optional[str] = None) -> Dict[str, Any]:
+    """The tiers on one scenario (JSON): ``tiers`` (name -> chance of success), ``true_share``,
+    ``held_share``, ``t_reach``, ``shoves`` (the GIL is released)."""
 
 # --- planner (crates/planner): decision layer and whole-maneuver controller --------------
 
@@ -619,6 +643,9 @@ class EpisodeResult(TypedDict):
     """Every planning time (ms) of the episode (steps that planned)."""
     ctrl_times_ms: _F64
     """Every control time (ms) of the episode (steps the MPC ran)."""
+    #: with ``record``, the upper layer's plans: ``time``, ``mode``, ``push_from``, ``push_to``,
+    #: ``push_peak``, ``predicted_heading_error`` (empty without)
+    plans: List[Dict[str, Any]]
     trajectory: Optional[_F64]
     """(steps, 26) per control step when recorded; columns: ``trajectory_columns()``."""
 

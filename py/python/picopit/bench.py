@@ -18,7 +18,9 @@ out over local processes or a Ray cluster, and writes the paper's tables and fig
   the relative speed at that contact, F: the share of its start speed a spun target kept
   when it first came round to the reversed heading, successes against failures.
 * ``case_success.png``, ``case_failure.png`` -- representative episodes (trajectories on the
-  road, states, bullet inputs), and ``cases.mcap`` with both (JSON-schema channels).
+  road, states, bullet inputs), and ``cases.mcap`` with both, which Foxglove opens: the scene,
+  transforms and poses with Foxglove's schemas, the steps as plot-ready JSON
+  (``picopit.cases_mcap``).
 
 The default scene set is a fixed stratified subset of the dataset (``SUBSET_SIZE`` scenes,
 strata = road category x adhesion band, proportional allocation, evenly spaced in file
@@ -41,6 +43,7 @@ import numpy as np
 
 from . import _core, funnel, provenance
 from .bench_checks import check_ray, finite_or_none
+from .cases_mcap import road_edges as _road_edges, station_span, write_mcap
 
 SUBSET_SIZE = 128
 CATEGORIES = ("straight_urban", "straight_highway", "curved")
@@ -603,22 +606,6 @@ def plot_panels(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def _road_edges(sc: Mapping[str, Any], s_lo: float, s_hi: float) -> List[np.ndarray]:
-    road = sc["road"]
-    hw = 0.5 * road["lanes"] * road["lane_width"] + road["shoulder"]
-    s = np.linspace(max(0.0, s_lo), max(s_lo + 1.0, s_hi), 300)
-    lines = []
-    for d in (-hw, hw):
-        lines.append(_core.road_poses(json.dumps(road), s, np.full_like(s, d))[:, :2])
-    carriage = 0.5 * road["lanes"] * road["lane_width"]
-    for k in range(1, road["lanes"]):
-        d = -carriage + k * road["lane_width"]
-        lines.append(_core.road_poses(json.dumps(road), s, np.full_like(s, d))[:, :2])
-    for d in (-carriage, carriage):
-        lines.append(_core.road_poses(json.dumps(road), s, np.full_like(s, d))[:, :2])
-    return lines
-
-
 def plot_case(case: Mapping[str, Any], sc: Mapping[str, Any], path: Path, title: str) -> None:
     from matplotlib.patches import Polygon
 
@@ -633,11 +620,7 @@ def plot_case(case: Mapping[str, Any], sc: Mapping[str, Any], path: Path, title:
     gs = fig.add_gridspec(3, 3, height_ratios=[1.6, 1, 1])
     ax = fig.add_subplot(gs[0, :])
     # Road: edges, lane lines; stations spanned by the episode.
-    s_lo = min(sc["target"]["s"], sc["bullet"]["s"]) - 20.0
-    dist = float(np.hypot(np.diff(c["target_x"]), np.diff(c["target_y"])).sum(initial=0.0))
-    dist_b = float(np.hypot(np.diff(c["bullet_x"]), np.diff(c["bullet_y"])).sum(initial=0.0))
-    s_hi = max(sc["target"]["s"], sc["bullet"]["s"]) + max(dist, dist_b) + 30.0
-    edges = _road_edges(sc, s_lo, s_hi)
+    edges = _road_edges(sc, *station_span(sc, c))
     for k, e in enumerate(edges):
         if k < 2:
             ax.plot(e[:, 0], e[:, 1], color="k", lw=1.5)
@@ -706,73 +689,6 @@ def plot_case(case: Mapping[str, Any], sc: Mapping[str, Any], path: Path, title:
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
-
-
-# --- MCAP ---------------------------------------------------------------------------------
-
-
-STEP_SCHEMA = {
-    "type": "object",
-    "title": "picopit.EpisodeStep",
-    "properties": {
-        "time": {"type": "number", "description": "s"},
-        "target": {"type": "object", "description": "[vx, vy, psi, r, p, phi, X, Y] (SI)"},
-        "bullet": {"type": "object", "description": "[X, Y, psi, vx, vy, r] (SI)"},
-        "command": {"type": "object", "description": "bullet steer (rad), rear torque (N m)"},
-        "target_command": {"type": "object", "description": "target steer (rad), brake (N m)"},
-        "contact_force": {"type": "object", "description": "F_n, F_t (N), averaged over the step"},
-        "phase": {"type": "string"},
-        "plan_ms": {"type": "number"},
-        "ctrl_ms": {"type": "number"},
-    },
-}
-SUMMARY_SCHEMA = {
-    "type": "object",
-    "title": "picopit.EpisodeSummary",
-    "properties": {k: {} for k in ("scenario", "config", "seed", "success", "cause", "decided_at",
-                                  "terminal_heading_error", "min_margin", "contacts")},
-}
-PHASES = ("chasing", "pit", "stabilising", "done", "aborted")
-
-
-def write_mcap(cases: Mapping[str, Mapping[str, Any]], path: Path) -> Optional[str]:
-    """Both cases in one MCAP file: ``/<case>/step`` (one message per control step) and
-    ``/<case>/summary``, JSON-encoded with JSON schemas (Foxglove shows them). Returns a
-    note instead when the ``mcap`` package is missing."""
-    try:
-        from mcap.writer import Writer
-    except ImportError:
-        return "the mcap package is not installed: no MCAP written (pip install mcap)"
-    cols = list(_core.trajectory_columns())
-    with open(path, "wb") as fh:
-        w = Writer(fh)
-        w.start(profile="", library="picopit bench")
-        step_id = w.register_schema("picopit.EpisodeStep", "jsonschema", json.dumps(STEP_SCHEMA).encode())
-        sum_id = w.register_schema("picopit.EpisodeSummary", "jsonschema", json.dumps(SUMMARY_SCHEMA).encode())
-        for name, case in cases.items():
-            ch = w.register_channel(f"/{name}/step", "json", step_id)
-            chs = w.register_channel(f"/{name}/summary", "json", sum_id)
-            tr = np.asarray(case["trajectory"])
-            for seq, row in enumerate(tr):
-                v = dict(zip(cols, row.tolist()))
-                msg = {
-                    "time": v["time"],
-                    "target": {k: v[f"target_{k}"] for k in ("vx", "vy", "psi", "r", "p", "phi", "x", "y")},
-                    "bullet": {k: v[f"bullet_{k}"] for k in ("x", "y", "psi", "vx", "vy", "r")},
-                    "command": {"steer": v["cmd_steer"], "torque": v["cmd_torque"]},
-                    "target_command": {"steer": v["target_steer"], "brake": v["target_brake"]},
-                    "contact_force": {"fn": v["contact_fn"], "ft": v["contact_ft"]},
-                    "phase": PHASES[int(v["phase"])],
-                    "plan_ms": v["plan_ms"],
-                    "ctrl_ms": v["ctrl_ms"],
-                }
-                ns = int(round(v["time"] * 1e9))
-                w.add_message(ch, log_time=ns, publish_time=ns, sequence=seq, data=json.dumps(msg).encode())
-            ns = int(round(float(tr[-1, 0]) * 1e9)) if len(tr) else 0
-            summ = {k: _finite(case[k]) if isinstance(case[k], float) else case[k] for k in SUMMARY_SCHEMA["properties"]}
-            w.add_message(chs, log_time=ns, publish_time=ns, sequence=0, data=json.dumps(summ).encode())
-        w.finish()
-    return None
 
 
 # --- the whole run ------------------------------------------------------------------------
@@ -964,8 +880,10 @@ def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[
         paths["contacts"] = out / "contacts.png"
         plot_contacts(table, list(cfg.configs), paths["contacts"])
         cases = {k: v for k, v in res.cases.items() if v is not None and v.get("trajectory") is not None}
+        scenes = {}
         for kind, case in cases.items():
             sc = _core.validate_scenario_line(json.dumps(_scenario_by_id(cfg, case["scenario"])))
+            scenes[kind] = sc
             title = (f"{kind}: {case['scenario']} ({sc['category']}, μ {sc['mu']:.2f}, {case['config']}) — "
                      f"{case['cause'] or 'success'} at {case['decided_at']:.2f} s, "
                      f"heading error {math.degrees(case['terminal_heading_error']):.0f}°")
@@ -973,7 +891,7 @@ def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[
             plot_case(case, sc, paths[f"case_{kind}"], title)
         if cases:
             mcap_path = out / "cases.mcap"
-            note = write_mcap(cases, mcap_path)
+            note = write_mcap(cases, scenes, mcap_path)
             if note:
                 res.notes.append(note)
                 (out / "cases.mcap.txt").write_text(note + "\n")

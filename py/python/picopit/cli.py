@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime as _dt
+import importlib
 import sys
 from pathlib import Path
 from typing import Any, Dict, List, NoReturn, Optional, Tuple
@@ -389,6 +390,22 @@ def _cmd_trials(args: argparse.Namespace) -> int:
     return 0
 
 
+def _unavailable_parser(sub, name: str, err: ModuleNotFoundError) -> None:
+    """A command whose options need a package that is not installed: it takes any arguments
+    and says what to install (``_missing_extra``)."""
+    extra = EXTRAS.get((err.name or "").split(".")[0], "?")
+    # No option prefix: every argument, `--out` and `--help` too, is taken as a word, so the
+    # command parses and then says what is missing.
+    p = sub.add_parser(name, help=f"(needs the '{extra}' extra: ./scripts/setup.sh --full)",
+                       prefix_chars="\x00", add_help=False)
+    p.add_argument("args", nargs="*", help=argparse.SUPPRESS)
+
+    def run(args: argparse.Namespace) -> int:
+        return _missing_extra(name, err)
+
+    p.set_defaults(func=run)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -401,12 +418,22 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     _simulate_parser(sub)
     _params_parser(sub)
-    _datagen_parser(sub)
-    _train_parser(sub)
-    _compress_parser(sub)
+    # The surrogate pipeline's options come from modules that import torch, which the main
+    # job's set-up does not install.
+    for add, name in ((_datagen_parser, "datagen"), (_train_parser, "train"),
+                      (_compress_parser, "compress")):
+        try:
+            importlib.import_module(f".{name}", __package__)
+        except ModuleNotFoundError as e:
+            _unavailable_parser(sub, name, e)
+            continue
+        add(sub)
     _eval_parser(sub)
     _scenarios_parser(sub)
     _bench_parser(sub)
+    from .cli_tools import add_parsers
+
+    add_parsers(sub)
     _replay_parser(sub)
     _trials_parser(sub)
     _validate_parser(sub)
@@ -442,6 +469,7 @@ def _check_params_name(name: str) -> None:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
+    from .plots import plot_simulation
     from .simulate import SimulateConfig, load_config_file, run, write_outputs
 
     values: Dict[str, Any] = {}
@@ -460,6 +488,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     check_dir(out, "--out")
     result = run(cfg, progress=not args.no_progress)
     paths = write_outputs(result, out)
+    paths["png"] = out / "simulate.png"
+    plot_simulation(result, paths["png"])
     s = result.summary
     print(
         f"simulate: peak contact force {s['peak_contact_force_N'] / 1e3:.1f} kN, "
@@ -707,14 +737,39 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: Optional[List[str]] = None) -> int:
-    from . import ParamError
-    from .simulate import ConfigError
+# Optional packages and the extra that brings each (py/pyproject.toml); the main job's set-up
+# (scripts/setup.sh) has none of them, scripts/setup.sh --full has all.
+EXTRAS = {"torch": "train", "safetensors": "train", "scipy": "test", "vehiclemodels": "test",
+          "casadi": "peers", "ray": "ray"}
 
+
+def _missing_extra(command: str, e: ModuleNotFoundError) -> int:
+    """One line naming the missing package and how to get it (exit status 2); other missing
+    modules are bugs and re-raised."""
+    name = (e.name or "").split(".")[0]
+    if name not in EXTRAS:
+        raise e
+    extra = EXTRAS[name]
+    print(f"picopit {command}: error: needs the Python package '{name}' (the '{extra}' extra): "
+          f"run ./scripts/setup.sh --full, or pip install 'picopit[{extra}]'", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
+def main(argv: Optional[List[str]] = None) -> int:
     global _ARGV
     _ARGV = argv
     parser = build_parser()
     args = parser.parse_args(argv)
+    try:
+        return _main(args)
+    except ModuleNotFoundError as e:
+        return _missing_extra(args.command, e)
+
+
+def _main(args: argparse.Namespace) -> int:
+    from . import ParamError
+    from .simulate import ConfigError
+
     bad_input: tuple = (ConfigError, ParamError, OutputError)
     if args.command in ("datagen", "train", "compress", "eval-surrogates"):
         from .datagen import DatasetError
@@ -732,6 +787,13 @@ def main(argv: Optional[List[str]] = None) -> int:
         from ._core import EpisodeError, ScenarioError
 
         bad_input += (BenchError, EpisodeError, ScenarioError)
+    if args.command in ("oracle", "trace", "seed-scatter"):
+        from .oracle import OracleError
+        from .seed_scatter import SeedScatterError
+        from .trace import TraceError
+        from ._core import EpisodeError, ScenarioError
+
+        bad_input += (OracleError, TraceError, SeedScatterError, EpisodeError, ScenarioError)
     if args.command == "replay":
         from .replay import ReplayError
 

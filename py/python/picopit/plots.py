@@ -1,17 +1,16 @@
-"""Figures. Everything here draws with matplotlib's non-interactive Agg backend."""
+"""The ``picopit simulate`` figure, with matplotlib's non-interactive Agg backend. It reads
+``simulate``'s results; ``simulate`` does not import it (the command line draws)."""
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Mapping, Optional, Sequence, Tuple
+from typing import Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 from . import _core
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .simulate import SimulateResult, Vehicle
+from .simulate import LANE_COUNT, LANE_WIDTH, SimulateResult, Vehicle
 
 BULLET_COLOR = "#1f5fbf"
 TARGET_COLOR = "#d1402a"
@@ -28,7 +27,7 @@ def _pyplot():
 
 
 def footprints_over_time(
-    x: np.ndarray, y: np.ndarray, yaw: np.ndarray, vehicle: "Vehicle"
+    x: np.ndarray, y: np.ndarray, yaw: np.ndarray, vehicle: Vehicle
 ) -> np.ndarray:
     """Corners (n, 4, 2) of a vehicle's footprint along a c.g. trajectory (rigid body,
     without the small roll/pitch shift the plant adds at bumper height)."""
@@ -103,11 +102,9 @@ def _contact_spans(t: np.ndarray, fn: np.ndarray) -> Sequence[Tuple[float, float
     return spans
 
 
-def plot_simulation(result: "SimulateResult", path: Path, title: Optional[str] = None) -> None:
+def plot_simulation(result: SimulateResult, path: Path, title: Optional[str] = None) -> None:
     """The ``picopit simulate`` figure: the road from above with both footprints over time
     (overview and a close-up of the contact), yaw angles, speeds and the contact force."""
-    from .simulate import LANE_COUNT, LANE_WIDTH
-
     plt = _pyplot()
     d: Mapping[str, np.ndarray] = result.data
     cfg = result.config

@@ -6,7 +6,9 @@ The recordings come from ``crates/vehicle_io/src/record.rs`` (one file per proce
   vehicles' boxes (``bullet.length``, ``bullet.width``, ``bullet.height``, the same for
   ``target``; metres as decimal strings), ``recorder.start_monotonic_ns``, ``recorder.pid``,
   ``service.<topic>`` names and the caller's own keys (command line, scenario id, git commit);
-- every channel has ``message_encoding = "json"`` and a ``jsonschema`` schema:
+- the topics ``replay`` reads are JSON (``message_encoding = "json"``, a ``jsonschema``
+  schema); the Foxglove topics (``/scene``, ``/tf``, ``/bullet/pose``, ``/target/pose``:
+  protobuf with Foxglove's schemas) and the plot topics are for viewers and are skipped:
 
   ========================= ============================ ==========================================
   topic                     schema                       message (JSON object)
@@ -16,7 +18,8 @@ The recordings come from ``crates/vehicle_io/src/record.rs`` (one file per proce
                                                          target[8] = [vx, vy, psi, r, p, phi, X, Y],
                                                          bullet[6] = [X, Y, psi, vx, vy, r],
                                                          target_input[2], bullet_applied[2],
-                                                         flags, commands_applied``
+                                                         contact_force[2], contact_gamma,
+                                                         contact_point[2], flags, commands_applied``
   ``/command``              ``picopit.ActuatorCommand``  ``seq, state_seq, stamp_ns, valid_until_ns,
                                                          wall_state_received_ns, wall_sent_ns, steer,
                                                          torque, mode (0 track, 1 fallback,
@@ -26,13 +29,12 @@ The recordings come from ``crates/vehicle_io/src/record.rs`` (one file per proce
                                                          stale_states, phase, mpc_status, faults``
   ``/heartbeat/controller`` ``picopit.Heartbeat``        ``seq, wall_sent_ns, vehicle_ns, peer, pid``
   ``/heartbeat/vehicle``    ``picopit.Heartbeat``        (same)
-  ``/scene``                ``foxglove.SceneUpdate``     entities ``bullet``, ``target`` (one cube
-                                                         each) and, now and then, ``road`` (line
-                                                         strips: left edge, right edge, centre)
-  ``/bullet/pose``          ``foxglove.PoseInFrame``     frame ``world``, yaw quaternion
-  ``/target/pose``          ``foxglove.PoseInFrame``     (same)
+  ``/road``                 ``picopit.Road``             ``left, right, centre``: ``[[X, Y], ...]``
+                                                         (once, at the start)
   ========================= ============================ ==========================================
 
+  A recording without ``/road`` whose ``/scene`` is JSON (an older recorder's) gives the road
+  from the first ``road`` entity on ``/scene`` (line strips: left edge, right edge, centre).
 - times: ``log_time`` = the recorder's receive time since the recording's start (ns,
   monotonic); ``publish_time`` = the payload's vehicle-clock time (``sent_ns`` of a state,
   ``stamp_ns`` of a command or status). A number that was not finite is ``null``.
@@ -64,7 +66,7 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 _OP_FOOTER = 0x02
 
 TOPICS = ("/state", "/command", "/status", "/heartbeat/controller", "/heartbeat/vehicle",
-          "/scene", "/bullet/pose", "/target/pose")
+          "/road", "/scene")
 MODES = {0: "track", 1: "fallback", 2: "safe stop"}
 PHASES = {0: "chasing", 1: "pit", 2: "stabilising", 3: "done", 4: "aborted"}
 FAULTS = {1 << 0: "stale state", 1 << 1: "deadline missed", 1 << 2: "solver failure",
@@ -122,8 +124,12 @@ class Recording:
         return box if ok else DEFAULT_BOX  # type: ignore[return-value]
 
     def road(self) -> List[List[Tuple[float, float]]]:
-        """The road's polylines from the first ``road`` entity on /scene (empty without one;
-        points that are not finite numbers are left out)."""
+        """The road's polylines from ``/road``, else from the first ``road`` entity on a JSON
+        ``/scene`` (empty without either; points that are not finite numbers are left out)."""
+        for _, _, msg in self.messages.get("/road", []):
+            if isinstance(msg, dict):
+                lines = [msg.get(k) for k in ("left", "right", "centre")]
+                return [[(p[0], p[1]) for p in line if _pair(p)] for line in lines if isinstance(line, list)]
         for _, _, msg in self.messages.get("/scene", []):
             ents = msg.get("entities", []) if isinstance(msg, dict) else []
             for e in ents if isinstance(ents, list) else []:
@@ -139,6 +145,10 @@ def _number(v: Any) -> bool:
     """A JSON number (not a bool) that is finite and not absurd."""
     return (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
             and abs(v) <= ABSURD)
+
+
+def _pair(p: Any) -> bool:
+    return isinstance(p, list) and len(p) == 2 and _number(p[0]) and _number(p[1])
 
 
 def _point(p: Any) -> bool:
@@ -238,7 +248,9 @@ def read_recording(path: "str | Path") -> Recording:
     try:
         for r in reader.records:
             if isinstance(r, Channel):
-                topics[r.id] = r.topic
+                # Only the JSON channels: the Foxglove topics (protobuf) are for viewers.
+                if r.message_encoding == "json":
+                    topics[r.id] = r.topic
             elif isinstance(r, Message):
                 topic = topics.get(r.channel_id)
                 if topic is None:

@@ -463,17 +463,11 @@ def read_csv(path: Path) -> Dict[str, np.ndarray]:
 
 
 def write_outputs(result: SimulateResult, out: Path) -> Dict[str, Path]:
-    """Write trajectory.csv, simulate.png and summary.json into ``out``."""
-    from .plots import plot_simulation
-
+    """Write trajectory.csv and summary.json into ``out`` (the figure, simulate.png, is
+    ``plots.plot_simulation``'s)."""
     out.mkdir(parents=True, exist_ok=True)
-    paths = {
-        "csv": out / "trajectory.csv",
-        "png": out / "simulate.png",
-        "json": out / "summary.json",
-    }
+    paths = {"csv": out / "trajectory.csv", "json": out / "summary.json"}
     write_csv(paths["csv"], result.data)
-    plot_simulation(result, paths["png"])
     with open(paths["json"], "w") as fh:
         json.dump({"config": dataclasses.asdict(result.config), "summary": result.summary}, fh, indent=2)
         fh.write("\n")

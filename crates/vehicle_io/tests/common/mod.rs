@@ -61,7 +61,8 @@ pub fn signal(child: &Child, sig: libc::c_int) {
 }
 
 /// Messages on `topic` in an MCAP file read as a stream, and whether the stream ended
-/// cleanly (a footer) rather than at a truncation. Every message must decode as JSON.
+/// cleanly (a footer) rather than at a truncation. Every JSON message must decode as JSON,
+/// every protobuf one as the Foxglove type its schema names (`schema_check::decodes`).
 pub fn count_messages(path: &Path, topic: &str) -> (usize, bool) {
     let Ok(bytes) = std::fs::read(path) else {
         return (0, false);
@@ -74,13 +75,24 @@ pub fn count_messages(path: &Path, topic: &str) -> (usize, bool) {
     for m in stream {
         match m {
             Ok(m) => {
-                let _: serde_json::Value = serde_json::from_slice(&m.data).unwrap_or_else(|e| {
-                    panic!(
-                        "{}: message on {} is not JSON: {e}",
+                if m.channel.message_encoding == "json" {
+                    let _: serde_json::Value =
+                        serde_json::from_slice(&m.data).unwrap_or_else(|e| {
+                            panic!(
+                                "{}: message on {} is not JSON: {e}",
+                                path.display(),
+                                m.channel.topic
+                            )
+                        });
+                } else {
+                    let schema = m.channel.schema.as_ref().map_or("", |s| s.name.as_str());
+                    assert!(
+                        schema_check::decodes(schema, &m.data),
+                        "{}: message on {} does not decode as {schema}",
                         path.display(),
                         m.channel.topic
-                    )
-                });
+                    );
+                }
                 if m.channel.topic == topic {
                     n += 1;
                 }
@@ -106,3 +118,4 @@ pub fn wait_for_messages(path: &Path, topic: &str, n: usize, limit: Duration) {
         std::thread::sleep(Duration::from_millis(10));
     }
 }
+pub mod schema_check;

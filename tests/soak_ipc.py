@@ -14,9 +14,12 @@ restarts one side (SIGTERM, or SIGKILL for a crash). It checks:
   ``picopit.replay.read_recording``;
 * every process that was not killed exits with status 0.
 
-Usage (after ./scripts/setup.sh; about 85 min for the default 10^5 cycles)::
+Usage (after ./scripts/setup.sh --full, which builds the binaries; about 85 min for the
+default 10^5 cycles)::
 
-    .venv/bin/python scripts/soak_ipc.py --cycles 100000 --out runs/soak
+    .venv/bin/python tests/soak_ipc.py --cycles 100000 --out runs/soak
+
+``tests/test_soak.py`` runs it briefly (a few hundred cycles with frequent events).
 
 It prints a summary and writes ``<out>/soak.json``; exit status 1 when a check failed.
 Recordings are deleted once read (``--keep-mcap`` keeps them).
@@ -137,7 +140,7 @@ def read_mcap(path: Path) -> Dict[str, Any]:
             "states": len(rec.messages.get("/state", [])), "undecodable": rec.undecodable}
 
 
-def main() -> int:
+def main(argv: Optional[List[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cycles", type=int, default=100_000, help="vehicle periods in total (default 10^5)")
     ap.add_argument("--seed", type=int, default=0)
@@ -148,7 +151,7 @@ def main() -> int:
                     help="seconds between faults, uniform (default 2 8)")
     ap.add_argument("--freeze-after", type=float, default=5.0, help="no recording growth this long: frozen (s)")
     ap.add_argument("--keep-mcap", action="store_true")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     rng = random.Random(args.seed)
     out = Path(args.out)
@@ -164,7 +167,7 @@ def main() -> int:
     sides = {"vehicle": vehicle, "controller": controller}
 
     report: Dict[str, Any] = {
-        "command": " ".join(sys.argv), "seed": args.seed, "cycles_goal": args.cycles,
+        "command": " ".join(sys.argv if argv is None else ["soak_ipc.py", *argv]), "seed": args.seed, "cycles_goal": args.cycles,
         "pauses": {"vehicle": 0, "controller": 0}, "pause_s": {"vehicle": 0.0, "controller": 0.0},
         "restarts": {"vehicle": {"SIGTERM": 0, "SIGKILL": 0}, "controller": {"SIGTERM": 0, "SIGKILL": 0}},
         "freezes": [], "bad_exits": [], "late_safe_stops": [], "unreadable_mcap": [],

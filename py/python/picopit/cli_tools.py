@@ -1,0 +1,177 @@
+"""The analysis subcommands of the ``picopit`` command line: ``oracle`` (the ideal-PIT bound
+and its tiers), ``trace`` (one episode step by step) and ``seed-scatter`` (the surrogates'
+accuracy over training seeds). Same conventions as ``cli``: bad
+input is one line and exit status 2 (``OracleError``, ``TraceError`` and the core's errors are
+bad input there), work that could not be completed exit status 1."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .outputs import check_file
+
+DEFAULT_SCENARIOS = "data/scenarios.jsonl"
+
+
+def add_parsers(sub) -> None:
+    _oracle_parser(sub)
+    _trace_parser(sub)
+    _seed_scatter_parser(sub)
+
+
+def _oracle_parser(sub) -> None:
+    p = sub.add_parser(
+        "oracle",
+        help="the ideal-PIT bound: could any single rear-quarter shove save each scene?",
+        description=(
+            "The ideal-PIT bound, a physics ceiling for the benchmark: for each scene, whether one "
+            "instantaneous rear-quarter shove of the grid (sizes x candidate times from the "
+            "bullet's earliest arrival x both sides) ends in success by the benchmark's test. "
+            "Prints the share of feasible scenes overall and by category, adhesion, driver and "
+            "parameter set. --tiers simulates the whole grid with the driver's true law and with "
+            "its command held and reports how much of the bound a controller could reach when its "
+            "push lands a step off, or when it sees only the driver's current command."
+        ),
+    )
+    p.add_argument("--scenarios", default=DEFAULT_SCENARIOS, metavar="JSONL",
+                   help=f"scenario file (default {DEFAULT_SCENARIOS}; the textbook set: data/textbook/scenarios.jsonl)")
+    p.add_argument("--first", type=int, default=0, metavar="K", help="skip the first K scenes (default 0)")
+    p.add_argument("--n", type=int, default=None, metavar="N", help="at most N scenes (default: all)")
+    p.add_argument("--ids", metavar="LIST", help="comma-separated scene ids instead of --first/--n")
+    p.add_argument("--tiers", action="store_true",
+                   help="the tiers (the whole grid twice per scene; default grid 10 sizes 0.4-3.15 m/s "
+                        "every 0.1 s)")
+    p.add_argument("--settings", metavar="JSON",
+                   help="oracle settings over the defaults, e.g. '{\"shoves\": [0.5, 1, 2, 3], "
+                        "\"time_step\": 0.1}' (fields: shoves, time_step, contact_back, min_remaining, "
+                        "exhaustive, sides, window)")
+    p.add_argument("--workers", type=int, default=1, metavar="W", help="scenes at a time (threads; default 1)")
+    p.add_argument("--scene-lines", action="store_true", help="also print one line per scene")
+    p.add_argument("--json", metavar="PATH", help="write the settings, per-scene results and summary here")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_oracle)
+
+
+def _cmd_oracle(args: argparse.Namespace) -> int:
+    from . import _core, oracle
+
+    if args.workers < 1:
+        raise oracle.OracleError(f"--workers {args.workers}: need at least 1")
+    if args.json:
+        check_file(args.json, "--json")
+    settings = oracle.resolve_settings(args.settings, args.tiers)
+    scenarios = _core.load_scenarios(str(args.scenarios))
+    ids = [i.strip() for i in args.ids.split(",") if i.strip()] if args.ids else None
+    scenes = oracle.select(scenarios, args.first, args.n, ids)
+    res = oracle.run(scenes, settings, tiers=args.tiers, workers=args.workers, progress=not args.no_progress)
+    if args.scene_lines:
+        for s in res.scenes:
+            print(res.line(s))
+    grid = f"shoves {settings['shoves']} m/s every {settings['time_step']} s"
+    print(f"oracle{' tiers' if args.tiers else ''}: {len(scenes)} scenes of {args.scenarios}, {grid}")
+    print(res.markdown(), end="")
+    if args.json:
+        print(f"oracle: wrote {oracle.write_json(res, Path(args.json))}")
+    errors = [s for s in res.scenes if s["error"] is not None]
+    if errors:
+        print(f"picopit oracle: {len(errors)} scenes errored, the first: {errors[0]['id']}: {errors[0]['error']}",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def _trace_parser(sub) -> None:
+    p = sub.add_parser(
+        "trace",
+        help="one closed-loop episode step by step: both vehicles on the road, phase, command, contact",
+        description=(
+            "Run one episode of the benchmark with its trajectory recorded and print it step by "
+            "step: time, phase, contact, the bullet's lead along the road (ds), each vehicle's "
+            "lateral offset d and heading relative to the road (deg) and speed (T: target, B: "
+            "bullet), the bullet's command and the contact force; then the episode's metrics. "
+            "Every EVERY-th step is shown, and every step in contact or where the phase changes."
+        ),
+    )
+    p.add_argument("scene", metavar="SCENE", help="scene id (e.g. sc-00000), or its 0-based position in the file")
+    p.add_argument("--scenarios", default=DEFAULT_SCENARIOS, metavar="JSONL",
+                   help=f"scenario file (default {DEFAULT_SCENARIOS}; the half-scale trials: "
+                        "data/trials/half_scale.jsonl)")
+    p.add_argument("--config", default="picopinn", metavar="NAME|JSON",
+                   help="a preset (4dof, pinn, picopinn, picopinn_no_upper) or a JSON configuration "
+                        "as picopit bench takes it (default picopinn)")
+    p.add_argument("--controller-config", metavar="TOML",
+                   help="controller settings over the configuration's (e.g. configs/controller_half_scale.toml)")
+    p.add_argument("--clock", choices=("simulated", "wall"), default="simulated",
+                   help="the controller's time budgets (default simulated: the trace repeats to the step)")
+    p.add_argument("--seed", type=int, default=0, help="episode seed (noise, actuator errors; default 0)")
+    p.add_argument("--models", default="models", metavar="DIR", help="model folder (default models)")
+    p.add_argument("--every", type=int, default=2, metavar="N", help="show every N-th step (default 2)")
+    p.add_argument("--plans", action="store_true",
+                   help="also list the upper layer's plans (mode, planned push, predicted heading error)")
+    p.add_argument("--csv", metavar="PATH", help="write every step, with the road-frame columns, as CSV")
+    p.add_argument("--plot", metavar="PNG", help="draw the episode (paths, yaw, speed, command, contact)")
+    p.set_defaults(func=_cmd_trace)
+
+
+def _cmd_trace(args: argparse.Namespace) -> int:
+    from . import trace as tr
+
+    if args.every < 1:
+        raise tr.TraceError(f"--every {args.every}: need at least 1")
+    for opt in ("csv", "plot"):
+        if getattr(args, opt):
+            check_file(getattr(args, opt), f"--{opt}")
+    if args.controller_config and not Path(args.controller_config).is_file():
+        raise tr.TraceError(f"--controller-config {args.controller_config}: no such file")
+    scene = tr.find_scene(Path(args.scenarios), args.scene)
+    t = tr.trace(scene, args.config, seed=args.seed, models=Path(args.models), clock=args.clock,
+                 controller_toml=Path(args.controller_config) if args.controller_config else None)
+    print(t.header())
+    print(t.table(args.every))
+    if args.plans:
+        print("\n".join(t.plan_lines()))
+    print(t.metrics())
+    if args.csv:
+        print(f"trace: wrote {t.write_csv(Path(args.csv))}")
+    if args.plot:
+        from .bench import plot_case
+
+        plot_case({"trajectory": t.trajectory}, scene, Path(args.plot), f"{scene['id']}: {args.config}")
+        print(f"trace: wrote {args.plot}")
+    return 0
+
+
+def _seed_scatter_parser(sub) -> None:
+    p = sub.add_parser(
+        "seed-scatter",
+        help="how the surrogates' accuracies move with the training seed (teacher vs PicoPINN)",
+        description=(
+            "For each SEED, train a teacher and compress a PicoPINN from it exactly as "
+            "models/regenerate.sh does (same data, the seed in place of 0), evaluate both on the "
+            "test split and print the errors and the ratio PicoPINN / teacher side by side. Seed 0 "
+            "is the shipped pair: its evaluation is read from models/<set>/eval.json. Each trained "
+            "seed writes OUT/<set>/s<SEED>/ and a models folder OUT/models_s<SEED>/ for picopit "
+            "bench --models (the other set linked to the shipped models). About 10 min per seed at "
+            "full size on two cores; needs the train extra."
+        ),
+    )
+    p.add_argument("seeds", nargs="+", type=int, metavar="SEED", help="training seeds (0: the shipped pair)")
+    p.add_argument("--set", dest="param_set", choices=("full_size", "half_scale"), default="full_size",
+                   help="parameter set (default full_size)")
+    p.add_argument("--data", metavar="DIR", help="datagen folder (default runs/surrogates/<set>/data, "
+                                                  "made by models/regenerate.sh)")
+    p.add_argument("--out", default="runs/seed-scatter", metavar="DIR",
+                   help="output folder (default runs/seed-scatter)")
+    p.add_argument("--models", default="models", metavar="DIR", help="the shipped models (default models)")
+    p.set_defaults(func=_cmd_seed_scatter)
+
+
+def _cmd_seed_scatter(args: argparse.Namespace) -> int:
+    from . import seed_scatter
+
+    data = Path(args.data) if args.data else Path("runs/surrogates") / args.param_set / "data"
+    evals = seed_scatter.run(args.seeds, args.param_set, data, Path(args.out), Path(args.models))
+    print(seed_scatter.markdown(args.seeds, evals), end="")
+    return 0

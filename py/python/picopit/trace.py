@@ -1,0 +1,179 @@
+"""``picopit trace SCENE``: one closed-loop episode of the benchmark, step by step.
+
+The episode runs as in ``picopit bench`` (``_core.run_episode`` with the trajectory recorded),
+by default on the simulated clock so that a trace repeats to the step. Each row of the table
+is one control step: the time, the controller's phase, whether the vehicles touch, the
+bullet's lead along the road over the target (``ds``), each vehicle's lateral offset from the
+road's reference line (``d``, m, left positive), its heading relative to the road (deg) and
+its speed, the bullet's command (front steer, rear torque) and the contact force on the
+target (normal and tangential, N). Every ``every``-th step is shown, and every step in
+contact or where the phase changes. The episode's metrics follow.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional
+
+import numpy as np
+
+from . import _core
+
+PHASES = ("chasing", "pit", "stabilising", "done", "aborted")
+#: The table's columns: name, width, format.
+COLUMNS = (("t", 6, "{:6.2f}"), ("phase", 11, "{:>11}"), ("contact", 7, "{:>7}"), ("ds", 7, "{:7.2f}"),
+           ("T.d", 6, "{:6.2f}"), ("T.psi", 7, "{:7.1f}"), ("T.v", 6, "{:6.2f}"), ("B.d", 6, "{:6.2f}"),
+           ("B.psi", 7, "{:7.1f}"), ("B.v", 6, "{:6.2f}"), ("steer", 7, "{:7.3f}"), ("torque", 8, "{:8.1f}"),
+           ("Fn", 7, "{:7.0f}"), ("Ft", 7, "{:7.0f}"))
+#: The metrics printed after the table, in this order.
+METRICS = ("success", "cause", "failed_vehicle", "decided_at", "at_rest", "contacts", "contact_at",
+           "impact_speed", "impact_angle", "reversed_at", "terminal_heading_error", "min_margin",
+           "final_phase", "abort", "mpc_failures")
+
+
+class TraceError(ValueError):
+    """Bad trace input: an unknown scene, a bad configuration or settings file."""
+
+
+@dataclass
+class Trace:
+    """A traced episode: the scene, the core's result and the trajectory's columns, with the
+    road-frame columns added (``target_s``, ``target_d``, ``target_dpsi``, the same for
+    ``bullet_``; heading relative to the road in rad)."""
+
+    scene: Dict[str, Any]
+    config: str
+    result: Dict[str, Any]
+    #: the recorded trajectory as the core returns it (``_core.trajectory_columns()``)
+    trajectory: np.ndarray
+    columns: Dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def contact_steps(self) -> np.ndarray:
+        """Indices of the steps with a contact force."""
+        return np.flatnonzero(self.columns["contact_fn"] > 0)
+
+    def rows(self, every: int = 2) -> List[Dict[str, Any]]:
+        """The table's rows: every ``every``-th step, every step in contact and every step
+        where the phase changes (the first and last steps too)."""
+        c = self.columns
+        n = len(c["time"])
+        phase = c["phase"]
+        keep = set(range(0, n, max(1, every))) | {n - 1} | set(self.contact_steps.tolist())
+        keep |= {i for i in range(1, n) if phase[i] != phase[i - 1]}
+        rows = []
+        for i in sorted(keep):
+            rows.append({
+                "t": c["time"][i], "phase": PHASES[int(phase[i])] if 0 <= int(phase[i]) < len(PHASES) else "?",
+                "contact": "yes" if c["contact_fn"][i] > 0 else "",
+                "ds": c["bullet_s"][i] - c["target_s"][i],
+                "T.d": c["target_d"][i], "T.psi": math.degrees(c["target_dpsi"][i]),
+                "T.v": math.hypot(c["target_vx"][i], c["target_vy"][i]),
+                "B.d": c["bullet_d"][i], "B.psi": math.degrees(c["bullet_dpsi"][i]),
+                "B.v": math.hypot(c["bullet_vx"][i], c["bullet_vy"][i]),
+                "steer": c["cmd_steer"][i], "torque": c["cmd_torque"][i],
+                "Fn": c["contact_fn"][i], "Ft": c["contact_ft"][i],
+            })
+        return rows
+
+    def table(self, every: int = 2) -> str:
+        head = " ".join(f"{name:>{w}}" for name, w, _ in COLUMNS)
+        lines = [head]
+        for r in self.rows(every):
+            lines.append(" ".join(fmt.format(r[name]) for name, _, fmt in COLUMNS))
+        return "\n".join(lines)
+
+    def header(self) -> str:
+        s = self.scene
+        return (f"scene {s['id']}: {s.get('category')}, adhesion {s.get('adhesion')} (mu {s.get('mu')}), "
+                f"driver {(s.get('driver') or {}).get('kind')}, {s.get('params')}; config {self.config}, "
+                f"seed {self.result.get('seed')}, {len(self.columns['time'])} steps")
+
+    def plan_lines(self) -> List[str]:
+        """One line per plan of the upper layer: when, the mode, the planned push's window and
+        peak normal force, the predicted heading error at the end of the look-ahead."""
+        out = []
+        for p in self.result.get("plans") or []:
+            window = ("none" if p["push_from"] is None
+                      else f"{p['push_from']:.2f}-{p['push_to']:.2f} s, peak {p['push_peak']:.0f} N")
+            out.append(f"plan at {p['time']:5.2f} s: {p['mode']}, push {window}, "
+                       f"predicted heading error {p['predicted_heading_error']:.3f} rad")
+        return out
+
+    def metrics(self) -> str:
+        parts = []
+        for k in METRICS:
+            v = self.result.get(k)
+            if isinstance(v, float):
+                v = f"{v:.3f}"
+            parts.append(f"{k} {v}")
+        return "metrics: " + ", ".join(parts)
+
+    def write_csv(self, path: Path) -> Path:
+        path = Path(path)
+        names = list(self.columns)
+        data = np.column_stack([self.columns[k] for k in names])
+        np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.9g")
+        return path
+
+
+def config_text(config: str, clock: str = "simulated", controller_toml: Optional[Path] = None) -> str:
+    """The configuration the core parses: a preset name or a JSON object, on ``clock`` unless
+    it names one, with the controller settings of a TOML file over its own."""
+    text = config.strip()
+    if text.startswith("{"):
+        try:
+            doc = json.loads(text)
+        except ValueError as e:
+            raise TraceError(f"--config: not JSON: {e}") from None
+        if not isinstance(doc, dict):
+            raise TraceError("--config: expected a preset name or a JSON object")
+    else:
+        doc = {"preset": text}
+    doc.setdefault("clock", clock)
+    if controller_toml is not None:
+        from . import _toml  # tomllib, or tomli before Python 3.11
+
+        try:
+            doc["controller"] = _toml.loads(Path(controller_toml).read_text())
+        except OSError as e:
+            raise TraceError(f"--controller-config {controller_toml}: {e.strerror or e}") from None
+        except ValueError as e:
+            raise TraceError(f"--controller-config {controller_toml}: {e}") from None
+    return json.dumps(doc)
+
+
+def find_scene(path: Path, scene_id: str) -> Dict[str, Any]:
+    """The scene ``scene_id`` of a scenario file (an integer is its 0-based position);
+    raises :class:`TraceError` when there is none."""
+    scenes = _core.load_scenarios(str(path))
+    for s in scenes:
+        if s["id"] == scene_id:
+            return dict(s)
+    if scene_id.isdigit() and int(scene_id) < len(scenes):
+        return dict(scenes[int(scene_id)])
+    near = [s["id"] for s in scenes[:3]]
+    raise TraceError(f"{scene_id}: no such scene in {path} ({len(scenes)} scenes, e.g. {', '.join(near)})")
+
+
+def trace(scene: Mapping[str, Any], config: str = "picopinn", seed: int = 0, models: Path = Path("models"),
+          clock: str = "simulated", controller_toml: Optional[Path] = None) -> Trace:
+    """Run the episode of ``scene`` with the trajectory recorded and add the road frame."""
+    text = config_text(config, clock, controller_toml)
+    try:
+        r = _core.run_episode(json.dumps(dict(scene)), text, seed, record=True, models_dir=str(models))
+    except (_core.EpisodeError, _core.ScenarioError) as e:
+        raise TraceError(str(e)) from None
+    tr = np.asarray(r.pop("trajectory"))
+    cols = {k: tr[:, i] for i, k in enumerate(_core.trajectory_columns())}
+    road = json.dumps(scene["road"])
+    for who, x, y, psi in (("target", "target_x", "target_y", "target_psi"),
+                           ("bullet", "bullet_x", "bullet_y", "bullet_psi")):
+        f = np.asarray(_core.road_project(road, cols[x].tolist(), cols[y].tolist()))
+        cols[f"{who}_s"] = f[:, 0]
+        cols[f"{who}_d"] = f[:, 1]
+        cols[f"{who}_dpsi"] = np.array([_core.wrap_angle(a) for a in cols[psi] - f[:, 2]])
+    return Trace(scene=dict(scene), config=config, result=r, trajectory=tr, columns=cols)

@@ -1,0 +1,143 @@
+"""``picopit oracle`` (the ideal-PIT bound, its tiers) and ``picopit trace`` (one episode step
+by step): they report what the core computes, and bad input is one line with exit status 2."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from picopit import _core, cli, oracle, trace
+
+ROOT = Path(__file__).resolve().parents[1]
+TEXTBOOK = ROOT / "data" / "textbook" / "scenarios.jsonl"
+TRIALS = ROOT / "data" / "trials" / "half_scale.jsonl"
+
+
+def test_oracle_finds_a_feasible_push_on_two_textbook_scenes(tmp_path, capsys):
+    """Textbook PIT scenes (dry straight highway, lane-keeping target): a rear-quarter shove
+    saves each, after the bullet can be there; the summary counts them."""
+    out = tmp_path / "oracle.json"
+    rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--n", "2", "--scene-lines", "--no-progress",
+                   "--json", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    doc = json.loads(out.read_text())
+    assert len(doc["scenes"]) == 2
+    for s in doc["scenes"]:
+        r = s["result"]
+        assert r["feasible"] and r["shove"]["time"] >= r["t_reach"] - 1e-9, s
+        assert r["shove"]["decided_at"] > r["shove"]["time"] + 1.0, "a spin takes time"
+        assert r["shove"]["dv"] in doc["settings"]["shoves"]
+        assert f"{s['id']} feasible: shove at" in text
+    assert doc["summary"]["all"] == {"n": 2, "share": {"feasible": 100.0}}
+    assert "| all | 2 | 100.0 % |" in text
+    assert "| category straight_highway | 2 |" in text and "| driver lane_keep | 2 |" in text
+
+
+def test_a_shove_of_nothing_saves_no_scene():
+    """The bound comes from the push: with only zero-size shoves no scene is feasible."""
+    scenes = oracle.select(_core.load_scenarios(str(TEXTBOOK)), 0, 2)
+    res = oracle.run(scenes, oracle.resolve_settings('{"shoves": [0.0]}', tiers=False), progress=False)
+    assert [s["result"]["feasible"] for s in res.scenes] == [False, False]
+    assert all(s["result"]["tried"] > 5 for s in res.scenes)
+    assert res.summary()["all"]["share"] == {"feasible": 0.0}
+
+
+def test_oracle_tiers_judge_choices_in_the_truth():
+    """On a coarse grid: the tiers are shares in [0, 1]; what is robust is also feasible, and
+    the expected success of the best box is no more than the bound."""
+    scenes = oracle.select(_core.load_scenarios(str(TEXTBOOK)), ids=["sc-00000"])
+    settings = oracle.resolve_settings('{"shoves": [1.0, 1.5, 2.0, 2.5], "time_step": 0.25}', tiers=True)
+    res = oracle.run(scenes, settings, tiers=True, progress=False)
+    r = res.scenes[0]["result"]
+    t = r["tiers"]
+    assert list(t) == list(_core.oracle_tier_names()) == res.names
+    assert all(0.0 <= v <= 1.0 for v in t.values())
+    assert t["ideal"] == 1.0 and 0 < r["true_share"] <= 1
+    assert t["robust-tv"] <= min(t["robust-t"], t["robust-v"]) <= t["ideal"]
+    assert t["ideal-exp"] <= t["ideal"] and t["held-exp"] <= t["ideal-exp"] + 1e-12
+    assert r["shoves"] > 0 and r["shoves"] % 8 == 0  # 4 sizes x 2 sides x the times
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--settings", '{"shoves": []}'], "shoves"),
+    (["--settings", '{"time_step": 0}'], "time_step"),
+    (["--settings", '{"shove": [1]}'], "shove"),
+    (["--settings", "[1"], "not JSON"),
+    (["--ids", "sc-99999"], "sc-99999"),
+    (["--first", "100000"], "--first"),
+    (["--workers", "0"], "--workers"),
+])
+def test_oracle_refuses_bad_input_naming_it(capsys, argv, words):
+    rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--no-progress", *argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "Traceback" not in err, err
+
+
+def test_trace_shows_the_contact_and_the_outcome(tmp_path, capsys):
+    """A textbook scene traced: the table has the steps in contact (every one, whatever
+    --every), the PIT phase, and the metrics the episode result holds; the CSV has every step
+    with the road frame, and the bullet starts behind the target in its lane beside it."""
+    csv = tmp_path / "trace.csv"
+    png = tmp_path / "trace.png"
+    rc = cli.main(["trace", "sc-00000", "--scenarios", str(TEXTBOOK), "--every", "50", "--csv", str(csv),
+                   "--plot", str(png), "--plans"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    lines = out.splitlines()
+    assert lines[0].startswith("scene sc-00000: straight_highway")
+    head = lines[1].split()
+    rows = [dict(zip(head, l.split())) for l in lines[2:] if l[:6].strip().replace(".", "").isdigit()]
+    contact = [r for r in rows if "yes" in r.values()]
+    assert contact, out
+    assert any(" pit " in f" {' '.join(r.values())} " for r in rows)
+    plans = [l for l in lines if l.startswith("plan at")]
+    assert any(": pit, push " in l and "peak" in l for l in plans), "the PIT plan and its push"
+    metrics = [l for l in lines if l.startswith("metrics:")][0]
+    assert "contacts " in metrics and "success " in metrics
+    data = np.genfromtxt(csv, delimiter=",", names=True)
+    n_contact = int((data["contact_fn"] > 0).sum())
+    assert n_contact == len(contact) > 0, "every step in contact is shown"
+    assert len(data) > len(rows), "--every thins the rest"
+    first = data[0]
+    assert first["bullet_s"] < first["target_s"] and abs(first["bullet_d"] - first["target_d"]) > 2.0
+    assert np.all(np.abs(data["target_dpsi"]) <= np.pi + 1e-9)
+    assert png.stat().st_size > 10_000
+
+
+def test_trace_matches_the_episode_the_benchmark_runs():
+    """The trace is the benchmark's episode: the same metrics as _core.run_episode on the same
+    configuration, and the road frame agrees with road_poses."""
+    scene = trace.find_scene(TEXTBOOK, "sc-00002")
+    t = trace.trace(scene, "4dof")
+    r = _core.run_episode(json.dumps(scene), trace.config_text("4dof"), 0)
+    for k in ("success", "contacts", "contact_at", "decided_at", "terminal_heading_error"):
+        assert t.result[k] == r[k], k
+    c = t.columns
+    back = np.asarray(_core.road_poses(json.dumps(scene["road"]), c["target_s"], c["target_d"]))
+    assert np.allclose(back[:, 0], c["target_x"], atol=1e-6) and np.allclose(back[:, 1], c["target_y"], atol=1e-6)
+
+
+def test_trace_runs_a_half_scale_trial_case_with_its_controller_settings(capsys):
+    """The half-scale trials in process: the trial file, its controller settings TOML."""
+    rc = cli.main(["trace", "R1", "--scenarios", str(TRIALS), "--every", "100",
+                   "--controller-config", str(ROOT / "configs" / "controller_half_scale.toml")])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert out.startswith("scene R1:") and "half_scale" in out.splitlines()[0]
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["sc-99999"], "sc-99999: no such scene"),
+    (["sc-00000", "--config", "nope"], "nope"),
+    (["sc-00000", "--config", '{"preset": "picopinn", "uncertainty": {"latency": -1}}'], "latency"),
+    (["sc-00000", "--controller-config", "/nonexistent.toml"], "/nonexistent.toml"),
+    (["sc-00000", "--every", "0"], "--every"),
+])
+def test_trace_refuses_bad_input_naming_it(capsys, argv, words):
+    rc = cli.main(["trace", "--scenarios", str(TEXTBOOK), *argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "Traceback" not in err, err
