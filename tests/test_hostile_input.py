@@ -228,3 +228,85 @@ def test_model_files(tmp_path, seed):
     # statistics): a step from a plain driving state is finite.
     x = model.step([15.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0])
     assert np.all(np.isfinite(x)), seed
+
+
+# --- MCAP recordings for `picopit replay` ---------------------------------------------------
+
+MCAP_TOPICS = ["/state", "/command", "/status", "/heartbeat/controller", "/heartbeat/vehicle", "/scene",
+               "/bullet/pose", "/target/pose"]
+
+
+def mcap_edit(rng: random.Random):
+    """An edit for tests/test_replay.py's `write_recording`: one field of one message set to a
+    hostile value or deleted, or the whole message replaced."""
+    topic, k = rng.choice(MCAP_TOPICS), rng.randrange(20)
+    choice = rng.random()
+
+    def edit(t, kk, msg):
+        if (t, kk) != (topic, k):
+            return msg
+        if choice < 0.1:
+            return rng.choice(HOSTILE[:6] + [[], "x", None])
+        msg = json.loads(json.dumps(msg))
+        paths = [p for p, _ in leaves(msg) if p]
+        path = rng.choice(paths)
+        if choice < 0.4 and not isinstance(path[-1], int):
+            del_at(msg, path)
+        else:
+            set_at(msg, path, rng.choice(HOSTILE))
+        return msg
+
+    return edit
+
+
+def mutate_bytes(data: bytes, rng: random.Random) -> bytes:
+    b = bytearray(data)
+    if rng.random() < 0.3:
+        return bytes(b[: rng.randrange(len(b))])
+    for _ in range(rng.randrange(1, 16)):
+        b[rng.randrange(len(b))] = rng.randrange(256)
+    return bytes(b)
+
+
+@pytest.mark.parametrize("seed", range(150))
+def test_mcap_recordings(tmp_path, seed):
+    from test_replay import write_recording
+
+    from picopit.replay import ReplayError, check_messages, read_recording
+
+    rng = random.Random(seed)
+    path = tmp_path / "run.mcap"
+    if seed % 2:
+        write_recording(path, n=20, edit=mcap_edit(rng), finish=rng.random() < 0.7)
+    else:
+        write_recording(path, n=20)
+        path.write_bytes(mutate_bytes(path.read_bytes(), rng))
+    try:
+        check_messages(read_recording(path))
+    except ReplayError as e:
+        assert str(e).strip() and "\n" not in str(e).strip(), str(e)
+
+
+@pytest.mark.parametrize("seed", range(0, 150, 15))
+def test_mcap_replays_from_the_command_line(tmp_path, capsys, seed):
+    """The whole command on a few of the cases above: it draws (exit 0) or says why in one
+    line (exit 2), never a traceback."""
+    from test_replay import write_recording
+
+    from picopit import cli
+
+    rng = random.Random(seed)
+    path = tmp_path / "run.mcap"
+    if seed % 2:
+        write_recording(path, n=20, edit=mcap_edit(rng), finish=rng.random() < 0.7)
+    else:
+        write_recording(path, n=20)
+        path.write_bytes(mutate_bytes(path.read_bytes(), rng))
+    rc = cli.main(["replay", str(path), "--out", str(tmp_path / "fig.png")])
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert rc in (0, 2), (rc, err)
+    if rc == 2:
+        assert len(err.strip().splitlines()) == 1, err
+    else:
+        assert (tmp_path / "fig.png").stat().st_size > 0
