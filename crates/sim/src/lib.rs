@@ -25,11 +25,9 @@ pub mod vehicle;
 pub use config::{ClockKind, EpisodeConfig, EpisodeError, ModelKind, Uncertainty};
 pub use episode::{run_episode, EpisodeResult, PlanRecord};
 pub use oracle::{
-    ideal_pit, oracle_tiers, shove_grid, shove_states, DriverView, GridChoice, OracleReport,
-    OracleSettings, ShoveGrid, ShoveState, TierReport,
+    ideal_pit, oracle_tiers, shove_grid, DriverView, GridChoice, OracleReport, OracleSettings,
+    ShoveGrid, TierReport,
 };
 pub use outcome::{FailureCause, JudgeSettings, Metrics, Monitor, Observation, Outcome, Status};
-pub use scenario::{
-    load_jsonl, parse_jsonl, DriverHypothesis, Scenario, ScenarioError, TargetDriver,
-};
+pub use scenario::{load_jsonl, parse_jsonl, Scenario, ScenarioError, TargetDriver};
 pub use screen::{screen, ScreenReport, ScreenSettings, Verdict};
