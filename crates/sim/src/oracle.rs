@@ -16,7 +16,7 @@
 //! follow-up). It measures how much of the dataset a PIT can save at all.
 
 use crate::outcome::{FailureCause, Monitor, Observation, Outcome, Status};
-use crate::scenario::{DriverHypothesis, Scenario, ScenarioError};
+use crate::scenario::{Scenario, ScenarioError};
 use crate::screen::{reach_time, target_alone, ScreenSettings};
 use dynamics::geometry::{rotate, Vec2};
 use dynamics::plant::{Plant, Which};
@@ -297,11 +297,6 @@ impl Snapshots {
                 let t = run.time();
                 run.held = Some(run.driver.command(t, None, &x, &run.road));
             }
-            DriverView::Assume(h) => {
-                let x = run.plant.target_state();
-                let d = run.road.project(Vec2::new(x[6], x[7])).d;
-                run.driver = run.driver.hypothesis(h, d);
-            }
         }
         run.shove(side, dv, pt.lr, pt.width, settings.contact_back);
         let outcome = loop {
@@ -372,9 +367,6 @@ pub enum DriverView {
     /// The driver's command at the moment of the shove, held to the end: all that a planner
     /// which sees the current command (and not the law behind it) can assume.
     Held,
-    /// From the shove on, a hypothesised reaction in place of the driver's law
-    /// ([`TargetDriver::hypothesis`]): what a planner with that driver model would believe.
-    Assume(DriverHypothesis),
 }
 
 /// Every shove of the grid `times × sides × shoves`, simulated: which succeed.
@@ -460,65 +452,19 @@ impl ShoveGrid {
         None
     }
 
-    /// What an optimiser over the push would pick in this grid's view: at the earliest time
-    /// with a success, the successful shove with the least `cost` (one value per shove, in
-    /// the order of `success`; ties go to the first), and every successful shove of that
-    /// time (indices into `success`, ascending), the pick among them. `None` when no shove
-    /// succeeds.
-    ///
-    /// # Panics
-    /// If `cost` does not hold one value per shove (a bug of the caller).
-    #[must_use]
-    pub fn earliest_optimum(&self, cost: &[f64]) -> Option<(usize, Vec<usize>)> {
-        assert_eq!(cost.len(), self.success.len(), "one cost per shove");
-        let c = self.earliest()?;
-        let per_time = self.sides.len() * self.shoves.len();
-        let at: Vec<usize> = (c.time * per_time..(c.time + 1) * per_time)
-            .filter(|&i| self.success[i])
-            .collect();
-        let pick = at
-            .iter()
-            .copied()
-            .reduce(|a, b| if cost[b] < cost[a] { b } else { a })?;
-        Some((pick, at))
-    }
-
     /// The successful shove whose box holds the most successes (the one that forgives the
     /// most); ties go to the earliest, then the first size and side.
     #[must_use]
     pub fn most_robust(&self, radius_time: usize, radius_shove: usize) -> Option<GridChoice> {
-        Self::most_robust_over(std::slice::from_ref(self), radius_time, radius_shove)
-    }
-
-    /// The shove whose boxes hold the most successes summed over `grids` (grids of the same
-    /// shape, e.g. one per driver hypothesis), among shoves that succeed in at least one
-    /// of them; ties as [`Self::most_robust`]. `of` counts the boxes of all grids.
-    ///
-    /// # Panics
-    /// If `grids` is empty or their shapes differ (a bug of the caller).
-    #[must_use]
-    pub fn most_robust_over(
-        grids: &[ShoveGrid],
-        radius_time: usize,
-        radius_shove: usize,
-    ) -> Option<GridChoice> {
-        let g0 = &grids[0];
-        assert!(
-            grids.iter().all(|g| g.success.len() == g0.success.len()),
-            "grids of different shapes"
-        );
-        let of = (2 * radius_time + 1) * (2 * radius_shove + 1) * grids.len();
+        let of = (2 * radius_time + 1) * (2 * radius_shove + 1);
         let mut best: Option<GridChoice> = None;
-        for it in 0..g0.times.len() {
-            for iv in 0..g0.shoves.len() {
-                for is in 0..g0.sides.len() {
-                    if !grids.iter().any(|g| g.get(it as isize, is, iv as isize)) {
+        for it in 0..self.times.len() {
+            for iv in 0..self.shoves.len() {
+                for is in 0..self.sides.len() {
+                    if !self.get(it as isize, is, iv as isize) {
                         continue;
                     }
-                    let score = grids
-                        .iter()
-                        .map(|g| g.box_score(it, is, iv, radius_time, radius_shove))
-                        .sum();
+                    let score = self.box_score(it, is, iv, radius_time, radius_shove);
                     if best.is_none_or(|b| score > b.score) {
                         best = Some(GridChoice {
                             time: it,
@@ -567,46 +513,6 @@ pub fn shove_grid(
         }
     }
     Ok(grid)
-}
-
-/// The target at one candidate shove time of a [`ShoveGrid`], as a planner would see it.
-#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
-pub struct ShoveState {
-    /// The candidate time (s), as in [`ShoveGrid::times`].
-    pub time: f64,
-    /// The true target state `[vx, vy, ψ, r, p, φ, X, Y]` then (no contact before it).
-    pub target: [f64; 8],
-    /// The driver's command `[δ, T_b]` then (what [`DriverView::Held`] holds).
-    pub command: [f64; 2],
-}
-
-/// The target's state and its driver's command at every candidate shove time of
-/// [`shove_grid`] with the same settings, in the grid's time order: what a chooser that
-/// sees the state and the current command (a planner) decides from.
-///
-/// # Errors
-/// As [`ideal_pit`].
-pub fn shove_states(
-    sc: &Scenario,
-    settings: &OracleSettings,
-) -> Result<Vec<ShoveState>, ScenarioError> {
-    let snaps = Snapshots::new(sc, settings)?;
-    Ok(snaps
-        .candidates(sc, settings)
-        .map(|snap| {
-            let x = snap.plant.target_state();
-            let t = snap.time();
-            // (The driver keeps state: ask a copy, as `try_shove` asks its copy of the run.)
-            let (steer, brake) = snap.driver.clone().command(t, None, &x, &snap.road);
-            let mut target = [0.0; 8];
-            target.copy_from_slice(x.as_slice());
-            ShoveState {
-                time: t,
-                target,
-                command: [steer, brake],
-            }
-        })
-        .collect())
 }
 
 /// The tiers of [`oracle_tiers`], in the order of [`TierReport::tiers`].
@@ -748,19 +654,6 @@ mod tests {
         assert!(grid(["...", "...", "...", "..."])
             .most_robust(1, 1)
             .is_none());
-    }
-
-    #[test]
-    fn the_most_robust_shove_over_several_grids_sums_their_boxes() {
-        let a = grid(["..x", "..x", "...", "..."]);
-        let b = grid(["...", "x..", "x..", "x.."]);
-        // Alone, each grid's best is its own; together the sum decides, over cells that
-        // succeed in either.
-        assert_eq!(a.most_robust(1, 1).map(|c| (c.time, c.shove)), Some((0, 2)));
-        let c = ShoveGrid::most_robust_over(&[a.clone(), b.clone()], 1, 1).unwrap();
-        assert_eq!((c.time, c.shove, c.score, c.of), (2, 0, 3, 18));
-        let one = ShoveGrid::most_robust_over(std::slice::from_ref(&a), 1, 1);
-        assert_eq!(one, a.most_robust(1, 1));
     }
 
     #[test]

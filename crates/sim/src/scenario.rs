@@ -828,21 +828,6 @@ pub fn parse_jsonl(text: &str) -> Result<Vec<Scenario>, ScenarioError> {
     Ok(out)
 }
 
-/// A hypothesis about how the target's driver reacts to the contact
-/// ([`TargetDriver::hypothesis`]).
-#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[serde(rename_all = "snake_case")]
-pub enum DriverHypothesis {
-    /// Goes on keeping the lane.
-    LaneKeep,
-    /// Lets go: no steer, no brake.
-    Release,
-    /// Stops steering and brakes after a reaction time.
-    Brake,
-    /// Steers against the yaw rate after a reaction time.
-    CounterSteer,
-}
-
 /// The target driver's command `(δ, T_b)` as a function of time, the first contact and the
 /// target's state. Allocation-free; keeps the last Frenet station as the projection hint.
 ///
@@ -904,41 +889,6 @@ impl TargetDriver {
     #[must_use]
     pub fn def(&self) -> &DriverDef {
         &self.def
-    }
-
-    /// This driver with its reaction to a contact replaced by a hypothesis, for a chooser
-    /// who sees the driver before the contact (a lane keeper's line and gain, kept; a driver
-    /// without input is taken as a nominal lane keeper of the line `d_now` it is on) but not
-    /// how it will react. The hypothesised brake and counter-steer use the middle of the
-    /// dataset's sampling ranges (reaction 0.5 s, brake 35 %, yaw-rate gain 0.25, largest
-    /// counter-steer 0.25 rad).
-    #[must_use]
-    pub fn hypothesis(&self, h: DriverHypothesis, d_now: f64) -> Self {
-        let (offset, gain) = match self.def {
-            DriverDef::LaneKeep { offset, gain }
-            | DriverDef::Brake { offset, gain, .. }
-            | DriverDef::CounterSteer { offset, gain, .. } => (offset, gain),
-            DriverDef::None { .. } => (d_now, 1.0),
-        };
-        let def = match h {
-            DriverHypothesis::LaneKeep => DriverDef::LaneKeep { offset, gain },
-            DriverHypothesis::Release => DriverDef::None { steer: 0.0 },
-            DriverHypothesis::Brake => DriverDef::Brake {
-                offset,
-                gain,
-                trigger: Trigger::Contact,
-                delay: 0.5,
-                fraction: 0.35,
-            },
-            DriverHypothesis::CounterSteer => DriverDef::CounterSteer {
-                offset,
-                gain,
-                delay: 0.5,
-                steer_gain: 0.25,
-                max_steer: 0.25,
-            },
-        };
-        Self { def, ..*self }
     }
 
     /// The lane-keeping steer toward the line `d = offset`.

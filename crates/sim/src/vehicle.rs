@@ -12,7 +12,7 @@
 //! steer gain, steer bias, torque gain; sensing noise per [`SimVehicle::sense`], in the order
 //! target vx vy ψ r p X Y, bullet X Y ψ vx vy r.
 
-use crate::episode::{EpisodeError, Uncertainty};
+use crate::config::{EpisodeError, Uncertainty};
 use crate::outcome::{Metrics, Monitor, Status};
 use crate::scenario::{Scenario, TargetDriver};
 use dynamics::params::ParamSet;

@@ -3,7 +3,7 @@
 
 mod common;
 
-use sim::oracle::{ideal_pit, shove_grid, shove_states, DriverView, OracleSettings, ShoveGrid};
+use sim::oracle::{ideal_pit, shove_grid, DriverView, OracleSettings};
 use sim::scenario::Scenario;
 
 fn scenario(v: &serde_json::Value) -> Scenario {
@@ -134,91 +134,4 @@ fn holding_the_command_is_not_knowing_the_drivers_law() {
         truth.success, held.success,
         "the driver's braking matters after a shove"
     );
-}
-
-/// A chooser whose hypothesis is the driver's own law sees the truth: on a lane keeper the
-/// lane-keeping hypothesis gives the true grid, and letting go of the wheel does not.
-#[test]
-fn the_right_driver_hypothesis_is_the_truth() {
-    use sim::DriverHypothesis;
-    let settings = shoves(&[1.5, 2.0, 2.5, 3.0]);
-    let sc = scenario(&common::straight());
-    let truth = shove_grid(&sc, &settings, DriverView::True).unwrap();
-    let keep = shove_grid(
-        &sc,
-        &settings,
-        DriverView::Assume(DriverHypothesis::LaneKeep),
-    )
-    .unwrap();
-    assert_eq!(truth, keep);
-    let release = shove_grid(
-        &sc,
-        &settings,
-        DriverView::Assume(DriverHypothesis::Release),
-    )
-    .unwrap();
-    assert_eq!(truth.times, release.times);
-    assert_ne!(
-        truth.success, release.success,
-        "the lane keeper's steer matters"
-    );
-}
-
-/// What a chooser sees at each candidate time (`shove_states`) lines up with the grid: one
-/// state per grid time, in order; the target drives on between them at its speed; and a
-/// lane keeper on its own lane's centre, undisturbed, is not steering.
-#[test]
-fn the_chooser_sees_one_state_per_grid_time() {
-    let sc = scenario(&common::straight());
-    let s = shoves(&[1.0]);
-    let g = shove_grid(&sc, &s, DriverView::Held).unwrap();
-    let states = shove_states(&sc, &s).unwrap();
-    assert!(states.len() > 10);
-    assert_eq!(
-        states.iter().map(|x| x.time).collect::<Vec<_>>(),
-        g.times,
-        "one state per grid time"
-    );
-    for w in states.windows(2) {
-        let dt = w[1].time - w[0].time;
-        let dx = w[1].target[6] - w[0].target[6];
-        let v = 0.5 * (w[0].target[0] + w[1].target[0]);
-        assert!(
-            (dx - v * dt).abs() < 0.02 * v * dt,
-            "dx {dx} against v dt {}",
-            v * dt
-        );
-        assert!(w[0].command[0].abs() < 1e-3, "steer {:?}", w[0].command);
-    }
-}
-
-/// The optimiser's pick is the cheapest success at the earliest time with one, never a
-/// cheaper failure nor a cheaper success at a later time; a grid without a success has
-/// none.
-#[test]
-fn the_earliest_optimum_is_the_cheapest_success_of_the_first_time() {
-    // 3 times × 2 sides × 2 sizes; index (time · 2 + side) · 2 + size.
-    let mut success = vec![false; 12];
-    success[4] = true; // time 1, side 0, size 0
-    success[7] = true; // time 1, side 1, size 1
-    success[8] = true; // time 2 (later; cheaper)
-    let g = ShoveGrid {
-        times: vec![0.0, 0.1, 0.2],
-        sides: vec![1.0, -1.0],
-        shoves: vec![1.0, 2.0],
-        success,
-        t_reach: 0.0,
-    };
-    let mut cost = vec![0.5; 12];
-    cost[5] = 0.0; // a failure at time 1, cheaper than any success
-    cost[8] = 0.0; // the later success
-    cost[7] = 0.2;
-    assert_eq!(g.earliest_optimum(&cost), Some((7, vec![4, 7])));
-    cost[4] = 0.2; // a tie goes to the first
-    assert_eq!(g.earliest_optimum(&cost), Some((4, vec![4, 7])));
-    let none = ShoveGrid {
-        success: vec![false; 12],
-        ..g
-    };
-    assert_eq!(none.earliest_optimum(&cost), None);
 }

@@ -159,8 +159,12 @@ impl ControlLoop {
         self.last_faults
     }
 
-    /// Predict the measured states forward by `dt` seconds (no contact).
-    fn predict(&mut self, s: &StateEstimate, dt: f64) -> (TargetState, BulletState) {
+    /// The delay compensation's prediction: the measured states of `s` carried forward by
+    /// `dt` seconds in steps of 5 ms, the bullet with its bicycle model under the command in
+    /// force when it was measured (`bullet_applied`), the target with the 4-DOF model under
+    /// its driver's input (`target_input`), without contact. `tests/predict.rs` sets it
+    /// against the plant.
+    pub fn predict(&mut self, s: &StateEstimate, dt: f64) -> (TargetState, BulletState) {
         let mut xt = TargetState::from_column_slice(&s.target);
         let mut xb = BulletState::from_column_slice(&s.bullet);
         let n = (dt / PREDICT_DT).round() as usize;

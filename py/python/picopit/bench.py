@@ -42,7 +42,7 @@ from typing import Any, Dict, Iterable, Iterator, List, Mapping, Optional, Seque
 import numpy as np
 
 from . import _core, funnel, provenance
-from .bench_checks import check_ray, finite_or_none
+from .bench_checks import BenchError, check_ray, finite_or_none
 from .cases_mcap import road_edges as _road_edges, station_span, write_mcap
 
 SUBSET_SIZE = 128
@@ -51,10 +51,6 @@ BANDS = ("low", "mid", "high")
 CAUSES = ("decision_infeasible", "no_termination", "boundary_violation", "secondary_collision",
           "unsafe_rebound")
 ERROR_CAUSE = "error"
-
-
-class BenchError(ValueError):
-    """A benchmark option or input that cannot be used; the message names it."""
 
 
 # --- scenes -------------------------------------------------------------------------------

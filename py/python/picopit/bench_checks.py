@@ -26,9 +26,11 @@ RAY_GCS_PORT = 6379
 RAY_CLIENT_PORT = 10001
 
 
-def _error(message: str) -> Exception:
-    from .bench import BenchError
+class BenchError(ValueError):
+    """A benchmark option or input that cannot be used; the message names it."""
 
+
+def _error(message: str) -> Exception:
     return BenchError(message)
 
 
@@ -46,14 +48,10 @@ def model_files(cfg: "BenchConfig", params_sets: List[str]) -> List[Tuple[str, s
     return out
 
 
-def check_models(cfg: "BenchConfig", scenes: Optional[List[Dict]] = None) -> None:
-    """Load every model file the run needs; raises ``BenchError`` naming the configuration
-    and the file when one is missing, refused by the core, or of another parameter set."""
-    if scenes is None:
-        from .bench import load_scenes
-
-        scenarios, idx = load_scenes(cfg)
-        scenes = [scenarios[i] for i in idx]
+def check_models(cfg: "BenchConfig", scenes: List[Dict]) -> None:
+    """Load every model file the run needs for ``scenes`` (the run's, ``bench.load_scenes``);
+    raises ``BenchError`` naming the configuration and the file when one is missing, refused
+    by the core, or of another parameter set."""
     counts: Dict[str, int] = {}
     for sc in scenes:
         counts[sc["params"]] = counts.get(sc["params"], 0) + 1

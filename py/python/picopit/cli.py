@@ -713,7 +713,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     from .bench_checks import check_models, check_ray
 
     check_ray(cfg.ray_address)
-    check_models(cfg)
+    scenarios, idx = bench.load_scenes(cfg)
+    check_models(cfg, [scenarios[i] for i in idx])
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     # The source tree's commit when the run starts (the extension is whatever was last built).
     extra = {"command": _command_line(_ARGV), "created": started, "git_commit": bench.git_commit()}
