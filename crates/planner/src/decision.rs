@@ -337,11 +337,16 @@ impl Planner {
     /// The bullet's contact pose on `side` (target frame) at the current candidate's contact
     /// point.
     fn contact_pose(&self, side: Side) -> mpc::StageReference {
+        self.contact_pose_at(side, self.contact_x)
+    }
+
+    /// The bullet's contact pose on `side` (target frame) at the contact point's body x `x_c`.
+    fn contact_pose_at(&self, side: Side, x_c: f64) -> mpc::StageReference {
         let s = &self.settings;
         pit_stage_at(
             &self.params,
             side,
-            self.contact_x,
+            x_c,
             s.contact_angle,
             s.overlap,
             s.push_speed,
@@ -379,35 +384,48 @@ impl Planner {
         Some(self.clamp_contact_x(x))
     }
 
-    /// Earliest time (s from now) the bullet can be at its contact pose on `side`: the
-    /// approach along the target ([`Profile`], from the bullet's relative position and speed,
-    /// arriving at rest relative to the target), moving across at `lateral_speed` at the same
-    /// time, plus a settling time; crossing behind the target to the other side first drops
-    /// back behind its rear bumper.
-    fn earliest_arrival(&self, side: Side, xt: &TargetState, xb: &BulletState) -> f64 {
+    /// Earliest time (s from now) the bullet can be at a contact pose on `side`, and the
+    /// contact point's body x there. The contact point is the one of the band the planner
+    /// tries (`contact_offsets` from the rear quarter) nearest to where the bullet would come
+    /// to rest relative to the target if it braked now: a bullet waiting a little behind the
+    /// rear-quarter station, or one that will stop a little short of it, is already at a
+    /// station. The time is the approach along the target ([`Profile`], from the bullet's
+    /// relative position and speed, arriving at rest relative to the target), moving across
+    /// at `lateral_speed` at the same time, plus a settling time; crossing behind the target
+    /// to the other side first drops back behind its rear bumper.
+    fn earliest_arrival(&self, side: Side, xt: &TargetState, xb: &BulletState) -> (f64, f64) {
         let s = &self.settings;
-        let c = self.contact_pose(side);
+        let x0 = self.contact_x_at(0.0);
+        let (lo, hi) = s
+            .contact_offsets
+            .iter()
+            .map(|&o| self.contact_x_at(o))
+            .fold((x0, x0), |(lo, hi), x| (lo.min(x), hi.max(x)));
+        let c = self.contact_pose_at(side, x0);
         let rel = crate::href::relative_position(xt, xb);
         let rel_vel = crate::href::relative_velocity(xt, xb);
-        let dx = (c.rel_pos.x - rel.x).abs();
+        let (a, cap) = (s.approach_accel(self.mu), s.approach_speed);
+        let stop = rel.x + rel_vel.x * rel_vel.x.abs() / (2.0 * a);
+        let x_c = (x0 + stop - c.rel_pos.x).clamp(lo, hi);
+        let goal = c.rel_pos.x + x_c - x0;
+        let dx = (goal - rel.x).abs();
         let dy = (c.rel_pos.y - rel.y).abs();
         let k = self.len_scale;
         if dx.hypot(dy) < 0.3 * k || self.gap(xt, xb) < 0.1 * k {
             // At the contact pose, or touching already: a PIT under way.
-            return 0.0;
+            return (0.0, x_c);
         }
-        let (a, cap) = (s.approach_accel(self.mu), s.approach_speed);
         let along = if side.sign() * rel.y < 0.0 {
             // On the other side: drop back behind the target's rear first.
             let behind = -(self.params.target.length - self.params.target.cg_to_front)
                 - self.params.bullet.cg_to_front
                 - 0.5 * k;
             Profile::new(rel.x, rel_vel.x, behind.min(rel.x), a, cap).time()
-                + Profile::new(behind.min(rel.x), 0.0, c.rel_pos.x, a, cap).time()
+                + Profile::new(behind.min(rel.x), 0.0, goal, a, cap).time()
         } else {
-            Profile::new(rel.x, rel_vel.x, c.rel_pos.x, a, cap).time()
+            Profile::new(rel.x, rel_vel.x, goal, a, cap).time()
         };
-        s.settle_time + along.max(dy / s.lateral_speed)
+        (s.settle_time + along.max(dy / s.lateral_speed), x_c)
     }
 
     /// Keep `o` if it is the best feasible candidate so far (or, while none is feasible, the
@@ -571,7 +589,7 @@ impl Planner {
                 closed_sides += 1;
                 continue;
             }
-            let t_arr = self.earliest_arrival(side, &input.target, &input.bullet);
+            let (t_arr, x_arr) = self.earliest_arrival(side, &input.target, &input.bullet);
             // In contact already: the window starts now.
             let offsets = if t_arr == 0.0 {
                 1
@@ -585,7 +603,7 @@ impl Planner {
                     continue;
                 }
                 candidates += 1;
-                self.contact_x = touch_x.unwrap_or_else(|| self.contact_x_at(0.0));
+                self.contact_x = touch_x.unwrap_or(x_arr);
                 if let Some(o) = self.evaluate(side, k0, lane, input) {
                     self.rank(o, &mut best, &mut best_any, &mut feasible);
                 }

@@ -385,3 +385,52 @@ fn judging_a_plans_own_push_gives_its_verdict() {
         planner::PlanError::NonFiniteState
     );
 }
+
+/// A bullet waiting on the stand-off line a little behind the rear-quarter station is at a
+/// station already: the contact points the planner tries (`contact_offsets`, the rear
+/// quarter and 0.4 m behind it) form a band, and its earliest arrival is at the point of the
+/// band nearest to where it would come to rest. On a slippery road (μ 0.3, a slow relative
+/// approach) the same bullet 0.3 m behind commits; 1 m behind, beyond the band, it chases.
+#[test]
+fn a_bullet_waiting_within_the_band_of_contact_points_commits() {
+    let s = PlannerSettings::default();
+    let p = params();
+    let mu = 0.3;
+    let mut settings = s.clone();
+    settings.qp.time_limit = 10.0;
+    let model = Box::new(FourDofTarget::new(&p.target, mu, settings.dt));
+    let mut planner = Planner::new(&p, mu, model, settings).unwrap();
+    let x_rq = mpc::reference::rear_quarter_x(&p);
+    let c = mpc::reference::pit_stage_at(
+        &p,
+        mpc::Side::Left,
+        x_rq,
+        s.contact_angle,
+        s.overlap,
+        s.push_speed,
+        (0.0, 0.0),
+    );
+    let road = road();
+    for (behind, commits) in [(0.3, true), (1.0, false)] {
+        let (xt, xb) = states(
+            &road,
+            c.rel_pos.x - behind,
+            c.rel_pos.y + s.standoff,
+            12.0,
+            12.0,
+        );
+        let pkg = planner.plan(&input(&road, &[], xt, xb)).unwrap();
+        if commits {
+            assert_ne!(pkg.mode, Mode::Chase, "{behind} m behind: {:?}", pkg.mode);
+            assert!(pkg.candidates > 0);
+            let x = pkg.contact_point.x;
+            assert!(
+                x <= x_rq + 1e-9 && x >= x_rq - 0.4 - 1e-9,
+                "contact point {x} outside the band [{}, {x_rq}]",
+                x_rq - 0.4
+            );
+        } else {
+            assert_eq!(pkg.mode, Mode::Chase, "{behind} m behind: {:?}", pkg.mode);
+        }
+    }
+}
