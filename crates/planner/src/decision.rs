@@ -20,7 +20,7 @@
 //! outcome, reported with its reason. The search is deterministic and allocates nothing
 //! after construction.
 
-use crate::approach::Profile;
+use crate::approach::{Profile, BRAKE_MARGIN};
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 use crate::settings::{length_scale, ContactPointModel, PlannerSettings, TargetDriverModel};
 use dynamics::bullet::BulletState;
@@ -1238,12 +1238,13 @@ impl Planner {
         p.contact_rel_heading = c.rel_heading;
         p.push_speed = s.push_speed;
         p.envelope_lat = c.envelope_lat;
-        p.approach = Profile::new(
+        p.approach = Profile::with_brake_margin(
             crate::href::relative_position(&input.target, &input.bullet).x,
             crate::href::relative_velocity(&input.target, &input.bullet).x,
             c.rel_pos.x,
             s.approach_accel(self.mu),
             s.approach_speed,
+            BRAKE_MARGIN,
         );
         p.window = match chosen {
             Some(o) => (
