@@ -38,6 +38,11 @@ use mpc::{QpStatus, Side};
 const GRAVITY: f64 = 9.81;
 /// Right-hand side of a row that cannot bind.
 const FAR: f64 = 1.0e3;
+
+/// How far along the target (m, full size; × the length scale) from the band of contact
+/// stations, and how fast relative to it (m/s; × the square root of the length scale), a
+/// waiting bullet counts as arrived for the earliest arrival ([`Planner::plan`]'s windows).
+const ARRIVAL_TOL: f64 = 0.3;
 /// Most obstacles a package carries.
 pub const MAX_OBSTACLES: usize = 32;
 
@@ -411,6 +416,19 @@ impl Planner {
         let dx = (goal - rel.x).abs();
         let dy = (c.rel_pos.y - rel.y).abs();
         let k = self.len_scale;
+        // A bullet waiting within `ARRIVAL_TOL` of the band (the MPC holds it a few tenths of
+        // a metre off its station, drifting at a few tenths of a metre per second) has
+        // arrived along the target once it stops: the turn-in closes the rest; at the
+        // approach's gentle acceleration on low adhesion, closing it first would take longer
+        // than the look-ahead leaves for a window. One still closing in has not.
+        let tol = ARRIVAL_TOL * k;
+        let (band_lo, band_hi) = (c.rel_pos.x + lo - x0 - tol, c.rel_pos.x + hi - x0 + tol);
+        let waiting = rel_vel.x.abs() < ARRIVAL_TOL * k.sqrt();
+        let goal_along = if waiting && (band_lo..=band_hi).contains(&rel.x) {
+            stop.clamp(band_lo, band_hi)
+        } else {
+            goal
+        };
         if dx.hypot(dy) < 0.3 * k || self.gap(xt, xb) < 0.1 * k {
             // At the contact pose, or touching already: a PIT under way.
             return (0.0, x_c);
@@ -421,9 +439,9 @@ impl Planner {
                 - self.params.bullet.cg_to_front
                 - 0.5 * k;
             Profile::new(rel.x, rel_vel.x, behind.min(rel.x), a, cap).time()
-                + Profile::new(behind.min(rel.x), 0.0, goal, a, cap).time()
+                + Profile::new(behind.min(rel.x), 0.0, goal_along, a, cap).time()
         } else {
-            Profile::new(rel.x, rel_vel.x, goal, a, cap).time()
+            Profile::new(rel.x, rel_vel.x, goal_along, a, cap).time()
         };
         (s.settle_time + along.max(dy / s.lateral_speed), x_c)
     }

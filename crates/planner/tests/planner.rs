@@ -434,3 +434,46 @@ fn a_bullet_waiting_within_the_band_of_contact_points_commits() {
         }
     }
 }
+
+/// On a very slippery road (μ 0.15: the approach closes at 0.37 m/s²) a bullet waiting on
+/// the stand-off line a quarter of a metre off the band of contact stations, ahead of it or
+/// behind it, as the MPC holds a waiting bullet, has arrived: it commits. Closing those
+/// 0.25 m first would take 1.6 s and leave no window in the look-ahead. The same bullet
+/// drifting away from the band at 0.5 m/s is not waiting: it chases.
+#[test]
+fn a_bullet_waiting_just_off_the_band_commits_on_a_slippery_road() {
+    let s = PlannerSettings::default();
+    let p = params();
+    let mu = 0.15;
+    let mut settings = s.clone();
+    settings.qp.time_limit = 10.0;
+    let model = Box::new(FourDofTarget::new(&p.target, mu, settings.dt));
+    let mut planner = Planner::new(&p, mu, model, settings).unwrap();
+    let c = mpc::reference::pit_stage_at(
+        &p,
+        mpc::Side::Left,
+        mpc::reference::rear_quarter_x(&p),
+        s.contact_angle,
+        s.overlap,
+        s.push_speed,
+        (0.0, 0.0),
+    );
+    // The band of the bullet's stations: the rear quarter and 0.4 m behind it.
+    let (front, back) = (c.rel_pos.x, c.rel_pos.x - 0.4);
+    let road = road();
+    for (rx, drift, commits) in [
+        (back - 0.25, 0.0, true),
+        (front + 0.25, 0.0, true),
+        (back - 0.25, -0.5, false),
+        (front + 0.25, 0.5, false),
+    ] {
+        let (xt, xb) = states(&road, rx, c.rel_pos.y + s.standoff, 12.0, 12.0 + drift);
+        let pkg = planner.plan(&input(&road, &[], xt, xb)).unwrap();
+        if commits {
+            assert!(pkg.candidates > 0, "{rx} at rest: no window");
+            assert_ne!(pkg.mode, Mode::Chase, "{rx} at rest");
+        } else {
+            assert_eq!(pkg.mode, Mode::Chase, "{rx} drifting at {drift}");
+        }
+    }
+}
