@@ -22,6 +22,7 @@
 
 use crate::approach::{Profile, BRAKE_MARGIN};
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
+use crate::race;
 use crate::settings::{length_scale, ContactPointModel, PlannerSettings, TargetDriverModel};
 use dynamics::bullet::BulletState;
 use dynamics::driver::LaneKeeper;
@@ -566,7 +567,7 @@ impl Planner {
         // The target reverses without further push (a PIT under way that has done its
         // work, or a target spinning out by itself): the decision is to stop pushing. The
         // package still reports the predicted margins.
-        {
+        let free_failure = {
             let side = input.side.unwrap_or_else(|| self.bullet_side(input));
             self.setup_candidate(side, self.n, lane);
             self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
@@ -580,7 +581,21 @@ impl Planner {
                 self.fill_package(Mode::Stabilise, None, None, lane, input);
                 return Ok(&self.package);
             }
-        }
+            // The race is judged against two drivers, the command held and a lane keeper:
+            // the target fails only when it fails under both (the later of the two).
+            let held = self.free_failure();
+            held.and_then(|h| {
+                let model = self.lane_keeper.replace(self.lane_keeper_of(input));
+                self.rollout(Some(input.road), &input.target, false, false);
+                self.linearise_rows(input.road, input.obstacles);
+                self.lane_keeper = model;
+                self.free_failure()
+                    .map(|l| if l.step > h.step { l } else { h })
+            })
+        };
+        // Sides on which the bullet cannot begin a push before the target's free motion
+        // fails (while chasing): the race there is lost.
+        let mut lost_sides = 0usize;
         let mut best: Option<Outcome> = None;
         let mut best_any: Option<Outcome> = None;
         let mut closed_sides = 0usize;
@@ -608,6 +623,12 @@ impl Planner {
                 continue;
             }
             let (t_arr, x_arr) = self.earliest_arrival(side, &input.target, &input.bullet);
+            if input.side.is_none()
+                && free_failure.is_some_and(|f| t_arr >= f.step as f64 * self.settings.dt)
+            {
+                lost_sides += 1;
+                continue;
+            }
             // In contact already: the window starts now.
             let offsets = if t_arr == 0.0 {
                 1
@@ -650,7 +671,9 @@ impl Planner {
         let chosen = best.or(best_any);
         // No side leaves the bullet room to line up: no PIT is possible here.
         let no_room = closed_sides == sides.len();
-        let mode = if no_room {
+        // Every open side's race is lost: the target fails before any push can begin.
+        let race_lost = !no_room && closed_sides + lost_sides == sides.len();
+        let mode = if no_room || race_lost {
             Mode::Abort
         } else if candidates == 0 {
             Mode::Chase
@@ -665,6 +688,8 @@ impl Planner {
         const BINDING: f64 = 0.25;
         let infeasible = if no_room {
             Some(Infeasible::RoadBoundary)
+        } else if race_lost {
+            free_failure.map(|f| f.reason)
         } else if best.is_none() && candidates > 0 {
             Some(match best_any {
                 None => Infeasible::Numerical,
@@ -697,6 +722,7 @@ impl Planner {
                 self.fill_package(mode, infeasible, None, lane, input);
             }
         }
+        self.package.race_lost = race_lost;
         Ok(&self.package)
     }
 
@@ -809,23 +835,38 @@ impl Planner {
     fn driver_model(&self, input: &PlannerInput<'_>) -> Option<LaneKeeper> {
         match self.settings.target_driver {
             TargetDriverModel::Held => None,
-            TargetDriverModel::LaneKeep => {
-                let road = input.road;
-                let d = road
-                    .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
-                    .d;
-                let lanes = road.spec().lanes;
-                let offset = (0..lanes)
-                    .map(|l| road.lane_center_offset(l))
-                    .min_by(|a, b| (a - d).abs().total_cmp(&(b - d).abs()))
-                    .unwrap_or(0.0);
-                Some(LaneKeeper {
-                    offset,
-                    gain: 1.0,
-                    wheelbase: self.params.target.wheelbase(),
-                })
-            }
+            TargetDriverModel::LaneKeep => Some(self.lane_keeper_of(input)),
         }
+    }
+
+    /// A lane keeper (gain 1) of the lane centre nearest to the target now.
+    fn lane_keeper_of(&self, input: &PlannerInput<'_>) -> LaneKeeper {
+        let road = input.road;
+        let d = road
+            .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
+            .d;
+        let lanes = road.spec().lanes;
+        let offset = (0..lanes)
+            .map(|l| road.lane_center_offset(l))
+            .min_by(|a, b| (a - d).abs().total_cmp(&(b - d).abs()))
+            .unwrap_or(0.0);
+        LaneKeeper {
+            offset,
+            gain: 1.0,
+            wheelbase: self.params.target.wheelbase(),
+        }
+    }
+
+    /// How the rollout the rows were last linearised at fails first ([`race::first_failure`]).
+    fn free_failure(&self) -> Option<race::Failure> {
+        let s = &self.settings;
+        race::first_failure(
+            &self.road_rows,
+            &self.obs_rows,
+            s.road_margin,
+            s.obstacle_clearance,
+            s.violation_tol,
+        )
     }
 
     /// Roll out with `forces` from `x0`; with `jac`, store the Jacobians and sensitivities.
@@ -1249,6 +1290,7 @@ impl Planner {
         let p = &mut self.package;
         p.mode = mode;
         p.infeasible = infeasible;
+        p.race_lost = false;
         p.time = input.time;
         p.side = self.side;
         p.contact_point = self.contact_point;

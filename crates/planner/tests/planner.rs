@@ -477,3 +477,48 @@ fn a_bullet_waiting_just_off_the_band_commits_on_a_slippery_road() {
         }
     }
 }
+
+/// The race: a target driving at 15 m/s onto a car parked in its lane 20 m ahead (it hits
+/// it within 1.1 s, whether its driver holds the wheel or keeps the lane), with the bullet
+/// 12 m behind, cannot be pushed before it hits: the decision is infeasible now
+/// (`race_lost`, for the obstacle). With the car 60 m ahead the bullet chases; and a
+/// target whose held steer would take it off the road within the look-ahead, but which a
+/// lane-keeping driver keeps on it, is no lost race either.
+#[test]
+fn a_target_that_fails_before_any_push_can_begin_is_a_lost_race() {
+    let s = PlannerSettings::default();
+    let road = road();
+    let mut p = planner(s);
+    let (xt, xb) = states(&road, -12.0, 0.0, 15.0, 15.0);
+    let parked = |ahead: f64| Obstacle {
+        x: xt[6] + ahead,
+        y: xt[7],
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    };
+    let near = [parked(20.0)];
+    let pkg = p.plan(&input(&road, &near, xt, xb)).unwrap();
+    assert_eq!(pkg.mode, Mode::Abort);
+    assert!(pkg.race_lost);
+    assert_eq!(pkg.infeasible, Some(Infeasible::ObstacleClearance));
+
+    let far = [parked(60.0)];
+    let pkg = p.plan(&input(&road, &far, xt, xb)).unwrap();
+    assert_eq!(pkg.mode, Mode::Chase);
+    assert!(!pkg.race_lost);
+
+    // In the right lane, 0.05 rad of right steer: off the road within the look-ahead if
+    // held.
+    let shift = road.lane_center_offset(0) - road.lane_center_offset(1);
+    let (mut xt, mut xb) = (xt, xb);
+    xt[7] += shift;
+    xb[1] += shift;
+    let mut inp = input(&road, &[], xt, xb);
+    inp.target_input = TargetInput::new(-0.05, 0.0);
+    let pkg = p.plan(&inp).unwrap();
+    assert!(pkg.predicted_road_margin < -1.0, "held, it leaves the road");
+    assert!(!pkg.race_lost, "{:?}", pkg.mode);
+}
