@@ -321,6 +321,9 @@ pub struct CoupledMpc {
     qp_bullet: Qp,
     /// Whether the last QP was the coupled one.
     coupled: bool,
+    /// Whether the bullet pushes ([`Self::set_pushing`]): the gap up to which a force may
+    /// be planned is `gap_release` then, `gap_engage` before.
+    pushing: bool,
     clock: Box<dyn Clock + Send + Sync>,
 }
 
@@ -434,6 +437,7 @@ impl CoupledMpc {
             qp_coupled: Self::build_qp(&settings, n, Self::coupled_layout(&settings))?,
             qp_bullet: Self::build_qp(&settings, n, BULLET_ONLY)?,
             coupled: true,
+            pushing: false,
             clock: Box::new(MonotonicClock::new()),
             settings,
         };
@@ -442,9 +446,11 @@ impl CoupledMpc {
     }
 
     /// Whether the bullet is pushing rather than chasing or falling back: selects the steer
-    /// bound's share of the grip, `lateral_fraction_push` or `lateral_fraction`. Cheap;
-    /// call it every control step.
+    /// bound's share of the grip, `lateral_fraction_push` or `lateral_fraction`, and the gap
+    /// up to which a force may be planned, `contact.gap_release` or `contact.gap_engage`.
+    /// Cheap; call it every control step.
     pub fn set_pushing(&mut self, pushing: bool) {
+        self.pushing = pushing;
         let f = if pushing {
             self.settings.lateral_fraction_push
         } else {
@@ -940,7 +946,12 @@ impl CoupledMpc {
             // A force only where the linearisation has the vehicles near, and only if the
             // reference plans one somewhere over the horizon: a reference that plans none
             // (a chase) keeps the bullet clear of the target (ramming its rear is no PIT).
-            let near = gap_start.min(g.gap) <= s.contact.gap_release && force_planned;
+            let release = if self.pushing {
+                s.contact.gap_release
+            } else {
+                s.contact.gap_engage
+            };
+            let near = gap_start.min(g.gap) <= release && force_planned;
             row.fn_max = if near { s.contact.force_max } else { 0.0 };
             row.band = near;
             if let Some(road) = input.road {

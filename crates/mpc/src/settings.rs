@@ -96,6 +96,11 @@ pub struct ContactSettings {
     /// Gap (m) of the linearisation beyond which no force may be planned at a step (its
     /// bound is 0); nearer, the compliance band below ties the force to the predicted gap.
     pub gap_release: f64,
+    /// The same gap before the bullet pushes (`CoupledMpc::set_pushing(false)`: the turn-in
+    /// of a committed PIT), at least `gap_release`: a turn-in whose linearisation keeps the
+    /// vehicles just beyond `gap_release` would otherwise never see that a force can be
+    /// planned once they touch, and holds the bullet off the target.
+    pub gap_engage: f64,
     /// Effective crush stiffness of the penetration law `F_n ≥ k (−gap)` (N/m): a planned
     /// overlap must be paid for with force.
     pub stiffness: f64,
@@ -112,6 +117,7 @@ impl Default for ContactSettings {
         Self {
             force_max: 40_000.0,
             gap_release: 0.3,
+            gap_engage: 0.4,
             stiffness: 2.0e5,
             friction: 0.3,
             band: 0.05,
@@ -254,6 +260,15 @@ impl MpcSettings {
         if self.qp.max_iter == 0 {
             return Err(invalid("qp.max_iter", "must be at least 1"));
         }
+        if self.contact.gap_engage < self.contact.gap_release {
+            return Err(invalid(
+                "contact.gap_engage",
+                format!(
+                    "must be at least contact.gap_release ({} < {})",
+                    self.contact.gap_engage, self.contact.gap_release
+                ),
+            ));
+        }
         let positive = [
             ("dt", self.dt),
             ("time_budget", self.time_budget),
@@ -265,6 +280,7 @@ impl MpcSettings {
             ("step_tol", self.step_tol),
             ("contact.force_max", self.contact.force_max),
             ("contact.gap_release", self.contact.gap_release),
+            ("contact.gap_engage", self.contact.gap_engage),
             ("contact.stiffness", self.contact.stiffness),
             ("contact.band", self.contact.band),
             ("qp.tol_gap", self.qp.tol_gap),
@@ -330,6 +346,8 @@ mod tests {
         assert!(e.to_string().contains("weights.penalty"), "{e}");
         let e = MpcSettings::from_toml_str("[contact]\nfriction = nan").unwrap_err();
         assert!(e.to_string().contains("contact.friction"), "{e}");
+        let e = MpcSettings::from_toml_str("[contact]\ngap_engage = 0.2").unwrap_err();
+        assert!(e.to_string().contains("contact.gap_engage"), "{e}");
         let e = MpcSettings::from_toml_str("horizn = 20").unwrap_err();
         assert!(e.to_string().contains("horizn"), "{e}");
     }

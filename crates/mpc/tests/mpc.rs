@@ -402,3 +402,57 @@ fn the_qp_time_limit_holds_per_solve_not_over_the_controllers_lifetime() {
         assert!(out.fallback.is_none(), "{out:?}");
     }
 }
+
+/// A turn-in that has stalled just beyond `gap_release`: the bullet parallel beside the
+/// target's rear quarter, 0.34 m off its side, with the reference at the contact pose and
+/// the corridor open. Pushing (`set_pushing(true)`) the linearisation keeps every stage
+/// beyond `gap_release`, so no force may be planned anywhere and nothing draws the bullet
+/// in; before the push (`set_pushing(false)`) the stages within `gap_engage` may carry a
+/// force, and the plan closes in to touch.
+#[test]
+fn a_turn_in_stalled_beyond_the_release_gap_plans_the_contact_before_the_push() {
+    let p = params();
+    let (rx, ry) = touching_rel(-0.34);
+    let mut s = situation(rx, ry, 0.0, 15.0, 15.0);
+    let contact = mpc::reference::pit_stage_at(
+        &p,
+        mpc::Side::Left,
+        -p.target.lr - 0.3,
+        12f64.to_radians(),
+        0.05,
+        1.0,
+        (3000.0, 11_000.0),
+    );
+    for st in &mut s.reference.stages {
+        *st = contact;
+    }
+    s.reference.target_weight = 1.0;
+    let c = settings().contact;
+    assert!(c.gap_release < 0.34 && 0.34 < c.gap_engage, "{c:?}");
+    let mut closest = Vec::new();
+    for pushing in [true, false] {
+        let mut m = mpc_with(settings(), four_dof(&p));
+        m.set_pushing(pushing);
+        m.solve(&input(&s, Some(&road()))).unwrap();
+        let open = (0..20)
+            .filter(|&k| m.stage_linearisation(k).fn_max > 0.0)
+            .count();
+        let plan = m.plan();
+        let gap = (1..=plan.len())
+            .map(|k| plan.pair[k].gap)
+            .fold(f64::INFINITY, f64::min);
+        closest.push(gap);
+        if pushing {
+            assert_eq!(open, 0, "pushing: no stage within gap_release");
+        } else {
+            assert!(
+                open > 0,
+                "before the push: stages within gap_engage may carry a force"
+            );
+        }
+    }
+    assert!(
+        closest[1] < closest[0] - 0.05,
+        "the plan should close in before the push: closest gap {closest:?} (pushing, not)"
+    );
+}

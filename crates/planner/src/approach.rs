@@ -4,7 +4,16 @@
 //! (bang-bang with a cruise). The upper layer's earliest arrival and the MPC reference of the
 //! approach both use it, so the window the plan promises is one the bullet can keep: a
 //! bullet that is already past its station, or still closing fast, first brakes, and never
-//! arrives faster than it can stop.
+//! arrives faster than it can stop. The MPC reference of the approach may brake up to
+//! [`BRAKE_MARGIN`] times harder to stop on the station when it is a little late
+//! ([`Profile::with_brake_margin`]); the earliest arrival does not count on that.
+
+/// How much harder than its acceleration the MPC reference of the approach may brake to stop
+/// on its station rather than run past it and come back ([`Profile::with_brake_margin`]).
+/// A bullet that follows the bang-bang profile a little late (a few tenths of a metre per
+/// second too fast where the braking begins: the drive torque takes time to turn round)
+/// would otherwise be planned past its station and back, seconds later.
+pub const BRAKE_MARGIN: f64 = 1.5;
 
 /// A planned 1-D relative motion: up to five constant-acceleration segments.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -21,6 +30,20 @@ impl Profile {
     /// `|v| ≤ speed_cap` (a start above the cap first slows to it).
     #[must_use]
     pub fn new(x0: f64, v0: f64, goal: f64, accel: f64, speed_cap: f64) -> Self {
+        Self::with_brake_margin(x0, v0, goal, accel, speed_cap, 1.0)
+    }
+
+    /// As [`Self::new`], but a motion that would overrun the goal braking at `accel` brakes
+    /// harder, at up to `brake_margin · accel`, when that stops it on the goal.
+    #[must_use]
+    pub fn with_brake_margin(
+        x0: f64,
+        v0: f64,
+        goal: f64,
+        accel: f64,
+        speed_cap: f64,
+        brake_margin: f64,
+    ) -> Self {
         let a = accel.max(1e-6);
         let cap = speed_cap.max(1e-6);
         let mut p = Self {
@@ -57,7 +80,10 @@ impl Profile {
             v = cap;
         }
         let stop = v * v / (2.0 * a);
-        if stop > d {
+        if stop > d && stop <= brake_margin * d {
+            // A little late: brake harder, at v²/(2d), to stop on the goal.
+            push(2.0 * d / v, -v * v / (2.0 * d));
+        } else if stop > d {
             // Past the goal by the time it has stopped: stop, then come back from rest.
             push(v / a, -a);
             rest_to_rest(stop - d, a, cap, -1.0, &mut push);
@@ -173,6 +199,16 @@ mod tests {
             (t - (1.0 + 2.0 * (2.0f64 / 2.0).sqrt())).abs() < 1e-9,
             "{t}"
         );
+        // A little late (braking at a overruns by 0.5 m): with the margin, brake at
+        // v²/(2d) ≤ 1.5 a and stop on the goal in 2d/v; without it, stop and come back.
+        let p = Profile::with_brake_margin(0.0, 4.0, 3.5, 2.0, 8.0, BRAKE_MARGIN);
+        assert!((p.time() - 1.75).abs() < 1e-9 && p.at(1.75) == (3.5, 0.0));
+        assert!((p.at(1.0).1 - (4.0 - 16.0 / 7.0)).abs() < 1e-9);
+        let back = 2.0 + 2.0 * (0.5f64 / 2.0).sqrt();
+        assert!((check(0.0, 4.0, 3.5, 2.0, 8.0) - back).abs() < 1e-9);
+        // Too late even for the margin (v²/(2d) = 2 a): stop, then come back.
+        let p = Profile::with_brake_margin(0.0, 4.0, 2.0, 2.0, 8.0, BRAKE_MARGIN);
+        assert!((p.time() - 4.0).abs() < 1e-9 && p.at(4.0) == (2.0, 0.0));
         // At rest on the goal: nothing to do.
         assert_eq!(Profile::new(1.0, 0.0, 1.0, 2.0, 8.0).time(), 0.0);
     }

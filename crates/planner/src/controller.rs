@@ -316,7 +316,10 @@ impl PitController {
             let pkg = self.planner.plan(&pin)?;
             if phase == Phase::Chasing && pkg.mode == Mode::Abort {
                 self.infeasible_count += 1;
-                if self.infeasible_count >= self.settings.phases.infeasible_patience {
+                // A lost race is not a plan that may come right later: give up at once.
+                if pkg.race_lost
+                    || self.infeasible_count >= self.settings.phases.infeasible_patience
+                {
                     let reason = pkg.infeasible.unwrap_or(crate::Infeasible::Numerical);
                     self.phases
                         .abort(AbortReason::DecisionInfeasible(reason), input.time);

@@ -20,8 +20,9 @@
 //! outcome, reported with its reason. The search is deterministic and allocates nothing
 //! after construction.
 
-use crate::approach::Profile;
+use crate::approach::{Profile, BRAKE_MARGIN};
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
+use crate::race;
 use crate::settings::{length_scale, ContactPointModel, PlannerSettings, TargetDriverModel};
 use dynamics::bullet::BulletState;
 use dynamics::driver::LaneKeeper;
@@ -38,6 +39,11 @@ use mpc::{QpStatus, Side};
 const GRAVITY: f64 = 9.81;
 /// Right-hand side of a row that cannot bind.
 const FAR: f64 = 1.0e3;
+
+/// How far along the target (m, full size; × the length scale) from the band of contact
+/// stations, and how fast relative to it (m/s; × the square root of the length scale), a
+/// waiting bullet counts as arrived for the earliest arrival ([`Planner::plan`]'s windows).
+const ARRIVAL_TOL: f64 = 0.3;
 /// Most obstacles a package carries.
 pub const MAX_OBSTACLES: usize = 32;
 
@@ -337,11 +343,16 @@ impl Planner {
     /// The bullet's contact pose on `side` (target frame) at the current candidate's contact
     /// point.
     fn contact_pose(&self, side: Side) -> mpc::StageReference {
+        self.contact_pose_at(side, self.contact_x)
+    }
+
+    /// The bullet's contact pose on `side` (target frame) at the contact point's body x `x_c`.
+    fn contact_pose_at(&self, side: Side, x_c: f64) -> mpc::StageReference {
         let s = &self.settings;
         pit_stage_at(
             &self.params,
             side,
-            self.contact_x,
+            x_c,
             s.contact_angle,
             s.overlap,
             s.push_speed,
@@ -379,35 +390,61 @@ impl Planner {
         Some(self.clamp_contact_x(x))
     }
 
-    /// Earliest time (s from now) the bullet can be at its contact pose on `side`: the
-    /// approach along the target ([`Profile`], from the bullet's relative position and speed,
-    /// arriving at rest relative to the target), moving across at `lateral_speed` at the same
-    /// time, plus a settling time; crossing behind the target to the other side first drops
-    /// back behind its rear bumper.
-    fn earliest_arrival(&self, side: Side, xt: &TargetState, xb: &BulletState) -> f64 {
+    /// Earliest time (s from now) the bullet can be at a contact pose on `side`, and the
+    /// contact point's body x there. The contact point is the one of the band the planner
+    /// tries (`contact_offsets` from the rear quarter) nearest to where the bullet would come
+    /// to rest relative to the target if it braked now: a bullet waiting a little behind the
+    /// rear-quarter station, or one that will stop a little short of it, is already at a
+    /// station. The time is the approach along the target ([`Profile`], from the bullet's
+    /// relative position and speed, arriving at rest relative to the target), moving across
+    /// at `lateral_speed` at the same time, plus a settling time; crossing behind the target
+    /// to the other side first drops back behind its rear bumper.
+    fn earliest_arrival(&self, side: Side, xt: &TargetState, xb: &BulletState) -> (f64, f64) {
         let s = &self.settings;
-        let c = self.contact_pose(side);
+        let x0 = self.contact_x_at(0.0);
+        let (lo, hi) = s
+            .contact_offsets
+            .iter()
+            .map(|&o| self.contact_x_at(o))
+            .fold((x0, x0), |(lo, hi), x| (lo.min(x), hi.max(x)));
+        let c = self.contact_pose_at(side, x0);
         let rel = crate::href::relative_position(xt, xb);
         let rel_vel = crate::href::relative_velocity(xt, xb);
-        let dx = (c.rel_pos.x - rel.x).abs();
+        let (a, cap) = (s.approach_accel(self.mu), s.approach_speed);
+        let stop = rel.x + rel_vel.x * rel_vel.x.abs() / (2.0 * a);
+        let x_c = (x0 + stop - c.rel_pos.x).clamp(lo, hi);
+        let goal = c.rel_pos.x + x_c - x0;
+        let dx = (goal - rel.x).abs();
         let dy = (c.rel_pos.y - rel.y).abs();
         let k = self.len_scale;
+        // A bullet waiting within `ARRIVAL_TOL` of the band (the MPC holds it a few tenths of
+        // a metre off its station, drifting at a few tenths of a metre per second) has
+        // arrived along the target once it stops: the turn-in closes the rest; at the
+        // approach's gentle acceleration on low adhesion, closing it first would take longer
+        // than the look-ahead leaves for a window. One still closing in has not.
+        let tol = ARRIVAL_TOL * k;
+        let (band_lo, band_hi) = (c.rel_pos.x + lo - x0 - tol, c.rel_pos.x + hi - x0 + tol);
+        let waiting = rel_vel.x.abs() < ARRIVAL_TOL * k.sqrt();
+        let goal_along = if waiting && (band_lo..=band_hi).contains(&rel.x) {
+            stop.clamp(band_lo, band_hi)
+        } else {
+            goal
+        };
         if dx.hypot(dy) < 0.3 * k || self.gap(xt, xb) < 0.1 * k {
             // At the contact pose, or touching already: a PIT under way.
-            return 0.0;
+            return (0.0, x_c);
         }
-        let (a, cap) = (s.approach_accel(self.mu), s.approach_speed);
         let along = if side.sign() * rel.y < 0.0 {
             // On the other side: drop back behind the target's rear first.
             let behind = -(self.params.target.length - self.params.target.cg_to_front)
                 - self.params.bullet.cg_to_front
                 - 0.5 * k;
             Profile::new(rel.x, rel_vel.x, behind.min(rel.x), a, cap).time()
-                + Profile::new(behind.min(rel.x), 0.0, c.rel_pos.x, a, cap).time()
+                + Profile::new(behind.min(rel.x), 0.0, goal_along, a, cap).time()
         } else {
-            Profile::new(rel.x, rel_vel.x, c.rel_pos.x, a, cap).time()
+            Profile::new(rel.x, rel_vel.x, goal_along, a, cap).time()
         };
-        s.settle_time + along.max(dy / s.lateral_speed)
+        (s.settle_time + along.max(dy / s.lateral_speed), x_c)
     }
 
     /// Keep `o` if it is the best feasible candidate so far (or, while none is feasible, the
@@ -530,7 +567,7 @@ impl Planner {
         // The target reverses without further push (a PIT under way that has done its
         // work, or a target spinning out by itself): the decision is to stop pushing. The
         // package still reports the predicted margins.
-        {
+        let free_failure = {
             let side = input.side.unwrap_or_else(|| self.bullet_side(input));
             self.setup_candidate(side, self.n, lane);
             self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
@@ -544,7 +581,21 @@ impl Planner {
                 self.fill_package(Mode::Stabilise, None, None, lane, input);
                 return Ok(&self.package);
             }
-        }
+            // The race is judged against two drivers, the command held and a lane keeper:
+            // the target fails only when it fails under both (the later of the two).
+            let held = self.free_failure();
+            held.and_then(|h| {
+                let model = self.lane_keeper.replace(self.lane_keeper_of(input));
+                self.rollout(Some(input.road), &input.target, false, false);
+                self.linearise_rows(input.road, input.obstacles);
+                self.lane_keeper = model;
+                self.free_failure()
+                    .map(|l| if l.step > h.step { l } else { h })
+            })
+        };
+        // Sides on which the bullet cannot begin a push before the target's free motion
+        // fails (while chasing): the race there is lost.
+        let mut lost_sides = 0usize;
         let mut best: Option<Outcome> = None;
         let mut best_any: Option<Outcome> = None;
         let mut closed_sides = 0usize;
@@ -571,7 +622,13 @@ impl Planner {
                 closed_sides += 1;
                 continue;
             }
-            let t_arr = self.earliest_arrival(side, &input.target, &input.bullet);
+            let (t_arr, x_arr) = self.earliest_arrival(side, &input.target, &input.bullet);
+            if input.side.is_none()
+                && free_failure.is_some_and(|f| t_arr >= f.step as f64 * self.settings.dt)
+            {
+                lost_sides += 1;
+                continue;
+            }
             // In contact already: the window starts now.
             let offsets = if t_arr == 0.0 {
                 1
@@ -585,7 +642,7 @@ impl Planner {
                     continue;
                 }
                 candidates += 1;
-                self.contact_x = touch_x.unwrap_or_else(|| self.contact_x_at(0.0));
+                self.contact_x = touch_x.unwrap_or(x_arr);
                 if let Some(o) = self.evaluate(side, k0, lane, input) {
                     self.rank(o, &mut best, &mut best_any, &mut feasible);
                 }
@@ -614,7 +671,9 @@ impl Planner {
         let chosen = best.or(best_any);
         // No side leaves the bullet room to line up: no PIT is possible here.
         let no_room = closed_sides == sides.len();
-        let mode = if no_room {
+        // Every open side's race is lost: the target fails before any push can begin.
+        let race_lost = !no_room && closed_sides + lost_sides == sides.len();
+        let mode = if no_room || race_lost {
             Mode::Abort
         } else if candidates == 0 {
             Mode::Chase
@@ -629,6 +688,8 @@ impl Planner {
         const BINDING: f64 = 0.25;
         let infeasible = if no_room {
             Some(Infeasible::RoadBoundary)
+        } else if race_lost {
+            free_failure.map(|f| f.reason)
         } else if best.is_none() && candidates > 0 {
             Some(match best_any {
                 None => Infeasible::Numerical,
@@ -661,6 +722,7 @@ impl Planner {
                 self.fill_package(mode, infeasible, None, lane, input);
             }
         }
+        self.package.race_lost = race_lost;
         Ok(&self.package)
     }
 
@@ -773,23 +835,38 @@ impl Planner {
     fn driver_model(&self, input: &PlannerInput<'_>) -> Option<LaneKeeper> {
         match self.settings.target_driver {
             TargetDriverModel::Held => None,
-            TargetDriverModel::LaneKeep => {
-                let road = input.road;
-                let d = road
-                    .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
-                    .d;
-                let lanes = road.spec().lanes;
-                let offset = (0..lanes)
-                    .map(|l| road.lane_center_offset(l))
-                    .min_by(|a, b| (a - d).abs().total_cmp(&(b - d).abs()))
-                    .unwrap_or(0.0);
-                Some(LaneKeeper {
-                    offset,
-                    gain: 1.0,
-                    wheelbase: self.params.target.wheelbase(),
-                })
-            }
+            TargetDriverModel::LaneKeep => Some(self.lane_keeper_of(input)),
         }
+    }
+
+    /// A lane keeper (gain 1) of the lane centre nearest to the target now.
+    fn lane_keeper_of(&self, input: &PlannerInput<'_>) -> LaneKeeper {
+        let road = input.road;
+        let d = road
+            .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
+            .d;
+        let lanes = road.spec().lanes;
+        let offset = (0..lanes)
+            .map(|l| road.lane_center_offset(l))
+            .min_by(|a, b| (a - d).abs().total_cmp(&(b - d).abs()))
+            .unwrap_or(0.0);
+        LaneKeeper {
+            offset,
+            gain: 1.0,
+            wheelbase: self.params.target.wheelbase(),
+        }
+    }
+
+    /// How the rollout the rows were last linearised at fails first ([`race::first_failure`]).
+    fn free_failure(&self) -> Option<race::Failure> {
+        let s = &self.settings;
+        race::first_failure(
+            &self.road_rows,
+            &self.obs_rows,
+            s.road_margin,
+            s.obstacle_clearance,
+            s.violation_tol,
+        )
     }
 
     /// Roll out with `forces` from `x0`; with `jac`, store the Jacobians and sensitivities.
@@ -1213,6 +1290,7 @@ impl Planner {
         let p = &mut self.package;
         p.mode = mode;
         p.infeasible = infeasible;
+        p.race_lost = false;
         p.time = input.time;
         p.side = self.side;
         p.contact_point = self.contact_point;
@@ -1220,12 +1298,13 @@ impl Planner {
         p.contact_rel_heading = c.rel_heading;
         p.push_speed = s.push_speed;
         p.envelope_lat = c.envelope_lat;
-        p.approach = Profile::new(
+        p.approach = Profile::with_brake_margin(
             crate::href::relative_position(&input.target, &input.bullet).x,
             crate::href::relative_velocity(&input.target, &input.bullet).x,
             c.rel_pos.x,
             s.approach_accel(self.mu),
             s.approach_speed,
+            BRAKE_MARGIN,
         );
         p.window = match chosen {
             Some(o) => (

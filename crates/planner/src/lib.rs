@@ -18,6 +18,7 @@ pub mod decision;
 pub mod href;
 pub mod package;
 pub mod phase;
+mod race;
 pub mod settings;
 
 pub use controller::{

@@ -81,6 +81,10 @@ pub struct DecisionPackage {
     pub mode: Mode,
     /// Set when `mode` is [`Mode::Abort`] because no feasible decision exists.
     pub infeasible: Option<Infeasible>,
+    /// The race is lost (with `mode` [`Mode::Abort`]): the target's free motion leaves the
+    /// road or hits an obstacle before the bullet can begin a push on any side, so no
+    /// later plan can do better and the controller gives up at once.
+    pub race_lost: bool,
     /// Planning time (s).
     pub time: f64,
     pub side: Side,
@@ -130,6 +134,7 @@ impl DecisionPackage {
         Self {
             mode: Mode::Chase,
             infeasible: None,
+            race_lost: false,
             time: 0.0,
             side: Side::Left,
             contact_point: Vec2::zeros(),

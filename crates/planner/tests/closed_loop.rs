@@ -148,3 +148,56 @@ fn without_the_upper_layer_the_maneuver_still_runs_its_phases() {
         r.phases
     );
 }
+
+/// A lost race ends the chase at the first plan, without waiting out the controller's
+/// patience with infeasible plans: the target runs onto a car parked 20 m ahead in its lane
+/// long before the bullet, 12 m behind, could begin a push.
+#[test]
+fn a_lost_race_is_decision_infeasible_at_once() {
+    use dynamics::bullet::BulletState;
+    use dynamics::road::Obstacle;
+    use dynamics::TargetState;
+    use planner::{AbortReason, Infeasible};
+    let params = ParamSet::builtin("full_size").unwrap();
+    let mu = 0.9;
+    let mut settings = ControllerSettings::default();
+    settings.mpc.time_budget = 10.0;
+    settings.mpc.qp.time_limit = 10.0;
+    settings.planner.qp.time_limit = 10.0;
+    assert!(settings.phases.infeasible_patience > 1);
+    let dt = settings.mpc.dt;
+    let model = || Box::new(FourDofTarget::new(&params.target, mu, dt));
+    let mut ctl = PitController::new(&params, mu, model(), model(), settings).unwrap();
+    let road = Road::straight(3000.0, 3, 3.5, 1.0);
+    let lane = road.lane_center_offset(1);
+    let mut target = TargetState::zeros();
+    target[0] = 15.0;
+    target[6] = 100.0;
+    target[7] = lane;
+    let parked = [Obstacle {
+        x: 120.0,
+        y: lane,
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    }];
+    let out = ctl
+        .step(&ControllerInput {
+            time: 0.0,
+            target,
+            bullet: BulletState::from_column_slice(&[88.0, lane, 0.0, 15.0, 0.0, 0.0]),
+            target_input: TargetInput::zeros(),
+            road: &road,
+            obstacles: &parked,
+        })
+        .unwrap();
+    assert_eq!(out.phase, Phase::Aborted);
+    assert_eq!(
+        ctl.abort_reason(),
+        Some(AbortReason::DecisionInfeasible(
+            Infeasible::ObstacleClearance
+        ))
+    );
+}

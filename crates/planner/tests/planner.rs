@@ -385,3 +385,140 @@ fn judging_a_plans_own_push_gives_its_verdict() {
         planner::PlanError::NonFiniteState
     );
 }
+
+/// A bullet waiting on the stand-off line a little behind the rear-quarter station is at a
+/// station already: the contact points the planner tries (`contact_offsets`, the rear
+/// quarter and 0.4 m behind it) form a band, and its earliest arrival is at the point of the
+/// band nearest to where it would come to rest. On a slippery road (μ 0.3, a slow relative
+/// approach) the same bullet 0.3 m behind commits; 1 m behind, beyond the band, it chases.
+#[test]
+fn a_bullet_waiting_within_the_band_of_contact_points_commits() {
+    let s = PlannerSettings::default();
+    let p = params();
+    let mu = 0.3;
+    let mut settings = s.clone();
+    settings.qp.time_limit = 10.0;
+    let model = Box::new(FourDofTarget::new(&p.target, mu, settings.dt));
+    let mut planner = Planner::new(&p, mu, model, settings).unwrap();
+    let x_rq = mpc::reference::rear_quarter_x(&p);
+    let c = mpc::reference::pit_stage_at(
+        &p,
+        mpc::Side::Left,
+        x_rq,
+        s.contact_angle,
+        s.overlap,
+        s.push_speed,
+        (0.0, 0.0),
+    );
+    let road = road();
+    for (behind, commits) in [(0.3, true), (1.0, false)] {
+        let (xt, xb) = states(
+            &road,
+            c.rel_pos.x - behind,
+            c.rel_pos.y + s.standoff,
+            12.0,
+            12.0,
+        );
+        let pkg = planner.plan(&input(&road, &[], xt, xb)).unwrap();
+        if commits {
+            assert_ne!(pkg.mode, Mode::Chase, "{behind} m behind: {:?}", pkg.mode);
+            assert!(pkg.candidates > 0);
+            let x = pkg.contact_point.x;
+            assert!(
+                x <= x_rq + 1e-9 && x >= x_rq - 0.4 - 1e-9,
+                "contact point {x} outside the band [{}, {x_rq}]",
+                x_rq - 0.4
+            );
+        } else {
+            assert_eq!(pkg.mode, Mode::Chase, "{behind} m behind: {:?}", pkg.mode);
+        }
+    }
+}
+
+/// On a very slippery road (μ 0.15: the approach closes at 0.37 m/s²) a bullet waiting on
+/// the stand-off line a quarter of a metre off the band of contact stations, ahead of it or
+/// behind it, as the MPC holds a waiting bullet, has arrived: it commits. Closing those
+/// 0.25 m first would take 1.6 s and leave no window in the look-ahead. The same bullet
+/// drifting away from the band at 0.5 m/s is not waiting: it chases.
+#[test]
+fn a_bullet_waiting_just_off_the_band_commits_on_a_slippery_road() {
+    let s = PlannerSettings::default();
+    let p = params();
+    let mu = 0.15;
+    let mut settings = s.clone();
+    settings.qp.time_limit = 10.0;
+    let model = Box::new(FourDofTarget::new(&p.target, mu, settings.dt));
+    let mut planner = Planner::new(&p, mu, model, settings).unwrap();
+    let c = mpc::reference::pit_stage_at(
+        &p,
+        mpc::Side::Left,
+        mpc::reference::rear_quarter_x(&p),
+        s.contact_angle,
+        s.overlap,
+        s.push_speed,
+        (0.0, 0.0),
+    );
+    // The band of the bullet's stations: the rear quarter and 0.4 m behind it.
+    let (front, back) = (c.rel_pos.x, c.rel_pos.x - 0.4);
+    let road = road();
+    for (rx, drift, commits) in [
+        (back - 0.25, 0.0, true),
+        (front + 0.25, 0.0, true),
+        (back - 0.25, -0.5, false),
+        (front + 0.25, 0.5, false),
+    ] {
+        let (xt, xb) = states(&road, rx, c.rel_pos.y + s.standoff, 12.0, 12.0 + drift);
+        let pkg = planner.plan(&input(&road, &[], xt, xb)).unwrap();
+        if commits {
+            assert!(pkg.candidates > 0, "{rx} at rest: no window");
+            assert_ne!(pkg.mode, Mode::Chase, "{rx} at rest");
+        } else {
+            assert_eq!(pkg.mode, Mode::Chase, "{rx} drifting at {drift}");
+        }
+    }
+}
+
+/// The race: a target driving at 15 m/s onto a car parked in its lane 20 m ahead (it hits
+/// it within 1.1 s, whether its driver holds the wheel or keeps the lane), with the bullet
+/// 12 m behind, cannot be pushed before it hits: the decision is infeasible now
+/// (`race_lost`, for the obstacle). With the car 60 m ahead the bullet chases; and a
+/// target whose held steer would take it off the road within the look-ahead, but which a
+/// lane-keeping driver keeps on it, is no lost race either.
+#[test]
+fn a_target_that_fails_before_any_push_can_begin_is_a_lost_race() {
+    let s = PlannerSettings::default();
+    let road = road();
+    let mut p = planner(s);
+    let (xt, xb) = states(&road, -12.0, 0.0, 15.0, 15.0);
+    let parked = |ahead: f64| Obstacle {
+        x: xt[6] + ahead,
+        y: xt[7],
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    };
+    let near = [parked(20.0)];
+    let pkg = p.plan(&input(&road, &near, xt, xb)).unwrap();
+    assert_eq!(pkg.mode, Mode::Abort);
+    assert!(pkg.race_lost);
+    assert_eq!(pkg.infeasible, Some(Infeasible::ObstacleClearance));
+
+    let far = [parked(60.0)];
+    let pkg = p.plan(&input(&road, &far, xt, xb)).unwrap();
+    assert_eq!(pkg.mode, Mode::Chase);
+    assert!(!pkg.race_lost);
+
+    // In the right lane, 0.05 rad of right steer: off the road within the look-ahead if
+    // held.
+    let shift = road.lane_center_offset(0) - road.lane_center_offset(1);
+    let (mut xt, mut xb) = (xt, xb);
+    xt[7] += shift;
+    xb[1] += shift;
+    let mut inp = input(&road, &[], xt, xb);
+    inp.target_input = TargetInput::new(-0.05, 0.0);
+    let pkg = p.plan(&inp).unwrap();
+    assert!(pkg.predicted_road_margin < -1.0, "held, it leaves the road");
+    assert!(!pkg.race_lost, "{:?}", pkg.mode);
+}
