@@ -356,6 +356,8 @@ def _trials_parser(sub) -> None:
     p.add_argument("--noise", choices=("none", "paper"), default="paper", help="sensing noise of the repeats (default paper)")
     p.add_argument("--latency", type=float, default=0.05, metavar="S", help="sensing latency of the repeats (s, default 0.05)")
     p.add_argument("--realtime", action="store_true", help="pace both processes by the wall clock (default: lock step)")
+    p.add_argument("--no-delay-compensation", action="store_true",
+                   help="the controller takes the states as current instead of predicting them over their age")
     p.add_argument("--jobs", type=int, default=1, metavar="N", help="runs at a time (default 1)")
     p.add_argument("--timeout", type=float, metavar="S", help="wall-time limit of one run (s; default from T_max)")
     p.add_argument("--model", choices=("4dof", "pinn", "picopinn"), help="controller's target surrogate (default: its settings')")
