@@ -393,29 +393,6 @@ def test_datagen_records_contacts_free_motion_and_splits(tiny_data):
     assert m2["data_hash"] == man["data_hash"]
 
 
-def test_impulse_timing_is_the_same_motion_and_explains_the_heading(tiny_data):
-    """Stepping the plant one integration step at a time to record the impulse centroid τ gives
-    the same data bit for bit; τ lies in (0, 1) on contact steps (NaN elsewhere); and knowing
-    it turns the trapezoid heading of a contact step, dt·(r + r⁺)/2, into the far closer
-    dt·r + dt·(r⁺ − r)·(1 − τ)."""
-    _, a, man = tiny_data
-    cfg = datagen.DatagenConfig.for_params("half_scale", episodes=12, seed=11)
-    b, m2 = datagen.generate(cfg, progress=False, impulse_timing=True)
-    assert m2["data_hash"] == man["data_hash"]
-    for k in datagen.ARRAYS:
-        assert np.array_equal(a[k], b[k]), k
-    contact = b["fc"][:, 0] > 0
-    tau = b["tau"]
-    assert np.all(np.isnan(tau[~contact])) and np.all((tau[contact] > 0) & (tau[contact] < 1))
-    assert np.std(tau[contact]) > 0.1  # pushes start and end anywhere within a step
-    x, xn = b["x"][contact], b["x_next"][contact]
-    dpsi = (xn[:, 2] - x[:, 2] + np.pi) % (2 * np.pi) - np.pi
-    dt = datagen.DT
-    trapezoid = dpsi - dt * 0.5 * (x[:, 3] + xn[:, 3])
-    timed = dpsi - (dt * x[:, 3] + dt * (xn[:, 3] - x[:, 3]) * (1 - tau[contact]))
-    assert np.sqrt(np.mean(timed ** 2)) < 0.4 * np.sqrt(np.mean(trapezoid ** 2))
-
-
 @pytest.mark.parametrize("edit, name", [
     (lambda a: a.pop("gamma"), "gamma"),
     (lambda a: a.__setitem__("x", np.where(np.arange(a["x"].size).reshape(a["x"].shape) == 5, np.inf, a["x"])), "'x'"),

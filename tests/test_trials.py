@@ -175,6 +175,20 @@ def test_cli_runs_that_errored_make_the_exit_status_1_with_the_count(tmp_path, c
     assert "stand-in failure" in captured.out
 
 
+def test_no_delay_compensation_reaches_the_controller_only(tmp_path):
+    """--no-delay-compensation goes on pit-controller's command line (and only there); by
+    default the controller compensates."""
+    args = cli.build_parser().parse_args(["trials", "--half-scale", "--bin-dir", str(_fake_bins(tmp_path / "b"))])
+    cfg = trials.build_config(args)
+    t = trials.Trial(case="R1", kind="nominal", seed=0, noise="none", latency=0.05, record=False)
+    veh, ctl = trials.commands(cfg, t, tmp_path, "p")
+    assert cfg.delay_compensation and "--no-delay-compensation" not in ctl + veh
+    args = cli.build_parser().parse_args(["trials", "--half-scale", "--no-delay-compensation",
+                                          "--bin-dir", str(_fake_bins(tmp_path / "c"))])
+    veh, ctl = trials.commands(trials.build_config(args), t, tmp_path, "p")
+    assert "--no-delay-compensation" in ctl and "--no-delay-compensation" not in veh
+
+
 def test_find_bin_dir_order(tmp_path):
     for name in ("pit-vehicle", "pit-controller"):
         f = tmp_path / name

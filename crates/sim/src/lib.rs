@@ -3,6 +3,8 @@
 //! * [`scenario`]: the scenario schema (JSON lines), its loader with typed errors naming
 //!   line and field, and the helpers that build the road, obstacles, the plant's initial
 //!   conditions and the target driver from a scenario.
+//! * [`driver`]: the target driver's definition and law (lane keeping, the throttle, the
+//!   reaction to the contact).
 //! * [`outcome`]: the success test and the single first failure cause of an episode.
 //! * [`config`]: an episode's configuration (surrogate, controller settings, uncertainty,
 //!   clock; the benchmark's presets) and its errors.
@@ -14,6 +16,7 @@
 //!   judge) one control period at a time, shared by the episode runner and `pit-vehicle`.
 
 pub mod config;
+pub mod driver;
 pub mod episode;
 pub mod oracle;
 pub mod outcome;

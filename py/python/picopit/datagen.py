@@ -237,13 +237,9 @@ class _Drive:
         return float(np.clip(self.mass * 1.5 * (v_des - v) / self.gain, self.tmin, self.tmax))
 
 
-def run_episode(spec: EpisodeSpec, params: str, pb: Mapping[str, Any], pt: Mapping[str, Any],
-                impulse_timing: bool = False) -> Dict[str, np.ndarray]:
-    """Simulate one episode; returns the per-step arrays (x, u, fc, gamma, point, x_next).
-
-    ``impulse_timing`` also returns ``tau``: when within each step the normal impulse acted,
-    its centroid as a fraction of the step (0 = start, 1 = end; NaN without contact). The
-    plant is then advanced one integration step at a time, which is the same motion."""
+def run_episode(spec: EpisodeSpec, params: str, pb: Mapping[str, Any], pt: Mapping[str, Any]
+                ) -> Dict[str, np.ndarray]:
+    """Simulate one episode; returns the per-step arrays (x, u, fc, gamma, point, x_next)."""
     plant = _core.Plant(params, mu=spec.mu)
     xb0, xt0 = initial_states(spec, pb, pt)
     plant.reset(xb0, xt0)
@@ -259,8 +255,7 @@ def run_episode(spec: EpisodeSpec, params: str, pb: Mapping[str, Any], pt: Mappi
     y0 = np.array(xt0[:2])
     psi0 = xt0[2]
     first_contact: Optional[float] = None
-    rows_x, rows_u, rows_c, rows_xn, rows_tau = [], [], [], [], []
-    n_sub = int(round(DT / plant.dt))
+    rows_x, rows_u, rows_c, rows_xn = [], [], [], []
     settled_for = 0.0
     for k in range(n_max):
         t = k * DT
@@ -301,17 +296,7 @@ def run_episode(spec: EpisodeSpec, params: str, pb: Mapping[str, Any], pt: Mappi
         elif spec.driver == "counter_steer":
             steer = float(np.clip(-0.25 * g * xt[3], -0.3, 0.3)) if reacted else 0.0
         plant.set_commands(b_cmd[0], b_cmd[1], steer, brake, b_cmd[2])
-        if impulse_timing:
-            imp = imp_t = 0.0
-            for i in range(n_sub):
-                plant.step()
-                ci = plant.contact()
-                if ci is not None:
-                    imp += ci["fc"][0]
-                    imp_t += ci["fc"][0] * (i + 0.5) / n_sub
-            rows_tau.append(imp_t / imp if imp > 0 else math.nan)
-        else:
-            plant.advance(DT)
+        plant.advance(DT)
         c = plant.take_contact_average()
         xn = plant.target_state()
         rows_x.append(xt)
@@ -335,8 +320,6 @@ def run_episode(spec: EpisodeSpec, params: str, pb: Mapping[str, Any], pt: Mappi
         "fc": c[:, 0:2].copy(), "gamma": c[:, 2].copy(), "point": c[:, 3:5].copy(),
         "x_next": np.array(rows_xn, dtype=np.float64),
     }
-    if impulse_timing:
-        out["tau"] = np.array(rows_tau, dtype=np.float64)
     return out
 
 
@@ -357,11 +340,8 @@ def content_hash(arrays: Mapping[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def generate(cfg: DatagenConfig, progress: bool = True,
-             impulse_timing: bool = False) -> Tuple[Dict[str, np.ndarray], Dict[str, Any]]:
-    """Run all episodes; returns the arrays and the manifest (without command/paths).
-    ``impulse_timing`` adds the array ``tau`` (:func:`run_episode`); it is not part of a
-    dataset file or its content hash."""
+def generate(cfg: DatagenConfig, progress: bool = True) -> Tuple[Dict[str, np.ndarray], Dict[str, Any]]:
+    """Run all episodes; returns the arrays and the manifest (without command/paths)."""
     cfg.validate()
     p = load_params_dict(cfg.params)
     pb, pt = p["bullet"], p["target"]
@@ -387,9 +367,9 @@ def generate(cfg: DatagenConfig, progress: bool = True,
     try:
         for e in range(cfg.episodes):
             spec = sample_episode(cfg, np.random.default_rng(ep_seeds[e]))
-            d = run_episode(spec, cfg.params, pb, pt, impulse_timing)
+            d = run_episode(spec, cfg.params, pb, pt)
             n = len(d["x"])
-            for k in ("x", "u", "fc", "gamma", "point", "x_next") + (("tau",) if impulse_timing else ()):
+            for k in ("x", "u", "fc", "gamma", "point", "x_next"):
                 parts.setdefault(k, []).append(d[k])
             parts["mu"].append(np.full(n, spec.mu))
             parts["episode"].append(np.full(n, e, dtype=np.int32))

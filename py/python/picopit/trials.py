@@ -161,6 +161,8 @@ class TrialsConfig:
     jobs: int = 1
     timeout: Optional[float] = None  # wall seconds per run; None: from the scenario's T_max
     model: Optional[str] = None
+    #: the controller predicts the states over their age (pit-controller's default)
+    delay_compensation: bool = True
     cwd: Path = field(default_factory=Path.cwd)  # the controller finds models/ from here
     t_max: Dict[str, float] = field(default_factory=dict)
 
@@ -272,6 +274,8 @@ def commands(cfg: TrialsConfig, t: Trial, run_dir: Path, prefix: str) -> Tuple[L
            "--controller-config", str(cfg.controller_config), "--summary", str(run_dir / "controller.json")]
     if cfg.model:
         ctl += ["--model", cfg.model]
+    if not cfg.delay_compensation:
+        ctl += ["--no-delay-compensation"]
     if t.record:
         veh += ["--record", str(run_dir / "vehicle.mcap")]
         ctl += ["--record", str(run_dir / "controller.mcap")]
@@ -849,6 +853,7 @@ def build_config(args: Any) -> TrialsConfig:
     cfg = TrialsConfig(scenarios=scenarios, controller_config=ctl_cfg, bin_dir=bin_dir, cases=cases,
                        repeats=args.repeats, noise=args.noise, latency=args.latency, realtime=args.realtime,
                        jobs=args.jobs, timeout=args.timeout, model=args.model,
+                       delay_compensation=not getattr(args, "no_delay_compensation", False),
                        cwd=root if root is not None else Path.cwd(),
                        t_max={c: float(known[c].get("t_max", 10.0)) for c in cases})
     return cfg.validate()
@@ -866,6 +871,7 @@ def run(args: Any, command: str) -> Tuple[Dict[str, Any], List[Dict[str, Any]], 
         "controller_config": str(cfg.controller_config), "bin_dir": str(cfg.bin_dir), "cases": cfg.cases,
         "repeats": cfg.repeats, "noise": cfg.noise, "latency": cfg.latency,
         "clock": "wall" if cfg.realtime else "simulated", "jobs": cfg.jobs, "model": cfg.model,
+        "delay_compensation": cfg.delay_compensation,
     }
     t0 = time.perf_counter()
     rows = run_all(cfg, out, progress=not args.no_progress)
