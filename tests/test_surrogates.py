@@ -409,46 +409,13 @@ def test_malformed_dataset_names_the_field(tiny_data, tmp_path, edit, name):
         datagen.load(tmp_path)
 
 
-def _longest_contact(f):
-    best = run = 0
-    for v in f:
-        run = run + 1 if v > 0 else 0
-        best = max(best, run)
-    return best
-
-
-def test_sustained_pushes_last_longer_and_press_less_than_hits():
-    """A sustained-push episode follows the target's side after the touch: its contact
-    runs are longer and its force lower than a hit's; the option replaces some episodes
-    and leaves the others as they were, bit for bit."""
-    cfg = datagen.DatagenConfig.for_params("full_size", episodes=16, seed=3)
-    hits, _ = datagen.generate(cfg, progress=False)
-    pushes, man = datagen.generate(dataclasses.replace(cfg, sustained=1.0), progress=False)
-    def per_episode(a):
-        f = [a["fc"][a["episode"] == e, 0] for e in range(16)]
-        return (np.array([(v > 0).sum() for v in f]), np.array([_longest_contact(v) for v in f]),
-                np.array([v.max() for v in f]))
-
-    (h_steps, h_long, h_peak), (p_steps, p_long, p_peak) = per_episode(hits), per_episode(pushes)
-    assert p_steps.mean() >= 1.8 * h_steps.mean(), (p_steps.mean(), h_steps.mean())
-    assert p_long.max() >= 12 and p_long.max() > h_long.max()  # 0.6 s and more in contact
-    assert np.median(p_peak) < 0.5 * np.median(h_peak), (np.median(p_peak), np.median(h_peak))
-    assert man["sampling"]["sustained"] == 1.0
-    half, _ = datagen.generate(dataclasses.replace(cfg, sustained=0.5), progress=False)
-    same = [e for e in range(16)
-            if np.array_equal(half["x"][half["episode"] == e], hits["x"][hits["episode"] == e])]
-    assert 0 < len(same) < 16
-
-
 def test_datagen_config_errors_name_the_field():
     with pytest.raises(datagen.DatasetError, match="episodes"):
         datagen.DatagenConfig.for_params("full_size", episodes=1)
     with pytest.raises(datagen.DatasetError, match="mu"):
         datagen.DatagenConfig(mu=(0.0, 2.0)).validate()
-    with pytest.raises(datagen.DatasetError, match="sustained"):
-        datagen.DatagenConfig(sustained=1.5).validate()
-    with pytest.raises(datagen.DatasetError, match="sustained_time"):
-        datagen.DatagenConfig(sustained_time=(1.0, 0.5)).validate()
+    with pytest.raises(datagen.DatasetError, match="push_time"):
+        datagen.DatagenConfig(push_time=(1.0, 0.5)).validate()
 
 
 # --------------------------------------------------------------------------------------

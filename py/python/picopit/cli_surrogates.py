@@ -39,18 +39,9 @@ def datagen_parser(sub) -> None:
     p.add_argument("--params", default="full_size", help="built-in parameter set or TOML (default full_size)")
     p.add_argument("--episodes", type=int, default=1200, metavar="N", help="episodes (default 1200)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
-    p.add_argument("--sustained", type=float, default=None, metavar="F",
-                   help="fraction of the episodes with a sustained push instead of a hit "
-                        f"(default {_default_sustained()})")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_datagen)
-
-
-def _default_sustained() -> float:
-    from .datagen import DatagenConfig
-
-    return DatagenConfig.sustained
 
 
 def train_parser(sub) -> None:
@@ -145,8 +136,7 @@ def _cmd_datagen(args: argparse.Namespace) -> int:
     from . import datagen
 
     check_params_name(args.params)
-    cfg = datagen.DatagenConfig.for_params(args.params, episodes=args.episodes, seed=args.seed,
-                                           sustained=args.sustained)
+    cfg = datagen.DatagenConfig.for_params(args.params, episodes=args.episodes, seed=args.seed)
     check_dir(args.out, "--out")
     arrays, manifest = datagen.generate(cfg, progress=not args.no_progress)
     manifest["command"] = args.command_line

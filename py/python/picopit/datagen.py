@@ -73,17 +73,6 @@ class DatagenConfig:
     pit_steer: Tuple[float, float] = (0.0, 0.15)
     push_time: Tuple[float, float] = (0.1, 0.6)
     reaction_time: Tuple[float, float] = (0.2, 0.8)
-    sustained: float = 0.0
-    """Fraction of the episodes with a sustained push instead of a hit. The bullet comes
-    alongside nearly parallel, closing sideways at ``sustained_closing`` and
-    ``sustained_speed_diff`` faster than the target, then for ``sustained_time`` after the
-    first touch follows the contact point on the target's side (5 cm inside it) with its
-    inner corner, so the contact lasts and the force stays moderate. The closed loop's
-    pushes are of this kind: a hit (the other episodes) closes sideways at v·sin(5–35°),
-    several m/s, and lasts ~3 steps (docs/surrogates.md)."""
-    sustained_time: Tuple[float, float] = (0.3, 1.2)
-    sustained_closing: Tuple[float, float] = (0.2, 1.5)
-    sustained_speed_diff: Tuple[float, float] = (0.0, 1.0)
     split_fractions: Tuple[float, float, float] = (0.7, 0.15, 0.15)
 
     @classmethod
@@ -105,8 +94,7 @@ class DatagenConfig:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise bad("seed", self.seed, "must be a non-negative integer")
         for name in ("target_speed", "speed_diff", "contact_angle_deg", "station", "mu", "lead_in",
-                     "pit_steer", "push_time", "reaction_time", "sustained_time", "sustained_closing",
-                     "sustained_speed_diff"):
+                     "pit_steer", "push_time", "reaction_time"):
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
                 raise bad(name, (lo, hi), "must be a finite range 0 <= lo <= hi")
@@ -116,8 +104,6 @@ class DatagenConfig:
             raise bad("mu", self.mu, "must lie in (0, 1.5]")
         if not self.contact_angle_deg[1] < 80:
             raise bad("contact_angle_deg", self.contact_angle_deg, "must stay below 80 deg")
-        if not (math.isfinite(self.sustained) and 0 <= self.sustained <= 1):
-            raise bad("sustained", self.sustained, "must be a fraction in [0, 1]")
         if not 0 < self.after <= 30:
             raise bad("after", self.after, "must lie in (0, 30] s")
         f = self.split_fractions
@@ -157,7 +143,6 @@ class EpisodeSpec:
     driver_gain: float
     drift_steer: float
     heading: float
-    sustained: bool = False
 
 
 def sample_episode(cfg: DatagenConfig, rng: np.random.Generator) -> EpisodeSpec:
@@ -171,14 +156,6 @@ def sample_episode(cfg: DatagenConfig, rng: np.random.Generator) -> EpisodeSpec:
         driver_gain=float(rng.uniform(0.6, 1.4)), drift_steer=float(rng.uniform(-0.02, 0.02)),
         heading=float(rng.uniform(-math.pi, math.pi)),
     )
-    # Drawn after the rest, so that without sustained pushes the episodes are those of
-    # before the option existed, bit for bit.
-    if cfg.sustained > 0 and rng.uniform() < cfg.sustained:
-        spec.sustained = True
-        spec.speed_diff = u(cfg.sustained_speed_diff)
-        vb = spec.target_speed + spec.speed_diff
-        spec.contact_angle = math.asin(min(0.5, u(cfg.sustained_closing) / vb))
-        spec.push_time = u(cfg.sustained_time)
     return spec
 
 
@@ -248,9 +225,6 @@ def run_episode(spec: EpisodeSpec, params: str, pb: Mapping[str, Any], pt: Mappi
                    pb["drive_torque_min"], pb["drive_torque_max"], pb["brake_torque_max"])
     vb_des = xb0[3]
     throttle = _Throttle.of(pt, float(xt0[3]))
-    push_point = np.array([-(pt["length"] - pt["cg_to_front"]) + spec.station * pt["length"],
-                           spec.side * (0.5 * pt["width"] - 0.05)])
-    corner_b = np.array([pb["cg_to_front"], -spec.side * 0.5 * pb["width"]])
     n_max = int(round((spec.lead_in + spec.after) / DT))
     y0 = np.array(xt0[:2])
     psi0 = xt0[2]
@@ -261,24 +235,11 @@ def run_episode(spec: EpisodeSpec, params: str, pb: Mapping[str, Any], pt: Mappi
         t = k * DT
         xt = plant.target_state()
         xb = plant.bullet_state()
-        R_b = _rot(xb[2])
         # Bullet: straight at speed, then the quarter turn with drive, then away and brake.
-        if first_contact is None and not spec.sustained:
+        if first_contact is None:
             b_cmd = (0.0, drive.torque(vb_des, xb[3]), 0.0)
-        elif first_contact is None or t < first_contact + spec.push_time:
-            steer_b, v_des = -spec.side * spec.pit_steer, vb_des
-            if spec.sustained:
-                # Follow the contact point on the target's side (5 cm inside it) with the
-                # bullet's inner corner: steer on the lateral error, close on the target's
-                # velocity along the bullet's heading plus the longitudinal error.
-                e = R_b.T @ (xt[6:8] + _rot(xt[2]) @ push_point - xb[0:2]) - corner_b
-                steer_b = float(np.clip(steer_b + 0.3 * e[1], -0.35, 0.35))
-                v_t = math.hypot(xt[0], xt[1]) * math.cos(xt[2] + math.atan2(xt[1], xt[0]) - xb[2])
-                v_des = v_t + float(np.clip(e[0], -1.0, 1.0))
-                if first_contact is None:
-                    steer_b -= -spec.side * spec.pit_steer  # no push before the touch
-                    v_des = max(v_des, vb_des)
-            b_cmd = (steer_b, drive.torque(v_des, xb[3]), 0.0)
+        elif t < first_contact + spec.push_time:
+            b_cmd = (-spec.side * spec.pit_steer, drive.torque(vb_des, xb[3]), 0.0)
         else:
             b_cmd = (spec.side * 0.1, 0.0, 0.8 * drive.brake_max)
         # Target driver.
