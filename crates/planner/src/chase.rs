@@ -25,6 +25,10 @@ const SAMPLE: f64 = 0.25;
 /// How long after the push window the bullet is still beside the target, falling back (s).
 pub(crate) const FALL_BACK: f64 = 0.5;
 
+/// How long before its earliest arrival the bullet is already beside the target (s): the
+/// stand-off pose is checked from then on.
+pub(crate) const BESIDE: f64 = 1.0;
+
 /// The longest the stand-off pose is checked ahead (s).
 pub(crate) const LOOK: f64 = 5.0;
 
@@ -78,20 +82,20 @@ impl Path<'_> {
         Pose2::new(x[idx::X] + dx, x[idx::Y] + dy, psi1)
     }
 
-    /// The first time (s from now, sampled every [`SAMPLE`] up to `horizon`) at which the
+    /// The first time (s from now, sampled every [`SAMPLE`] from `from` to `to`) at which the
     /// bullet at `stand` beside the predicted target would have its footprint within
     /// `clearance` of an obstacle; `None` if it stays clear.
     pub fn blocked_at(
         &self,
         params: &ParamSet,
         stand: StandOff,
-        horizon: f64,
+        (from, to): (f64, f64),
         clearance: f64,
     ) -> Option<f64> {
         let b = &params.bullet;
-        let steps = (horizon / SAMPLE).ceil().max(0.0) as usize;
+        let steps = ((to - from) / SAMPLE).ceil().max(0.0) as usize;
         (0..=steps)
-            .map(|i| (i as f64 * SAMPLE).min(horizon))
+            .map(|i| (from + i as f64 * SAMPLE).min(to))
             .find(|&t| {
                 let pose = self.target_pose(t);
                 let c = pose.world_from_body(stand.rel_pos);
@@ -182,15 +186,23 @@ mod tests {
             rel_heading: 0.0,
         };
         // The bullet's front reaches the car's rear (minus the clearance) after ~1.4 s.
-        let t = path(&parked).blocked_at(&params, left, 4.0, 0.5).unwrap();
+        let t = path(&parked)
+            .blocked_at(&params, left, (0.0, 4.0), 0.5)
+            .unwrap();
         assert!((1.0..=2.0).contains(&t), "blocked at {t}");
-        assert_eq!(path(&parked).blocked_at(&params, left, 1.0, 0.5), None);
-        assert_eq!(path(&[]).blocked_at(&params, left, 4.0, 0.5), None);
+        assert_eq!(
+            path(&parked).blocked_at(&params, left, (0.0, 1.0), 0.5),
+            None
+        );
+        assert_eq!(path(&[]).blocked_at(&params, left, (0.0, 4.0), 0.5), None);
         // On the other side, the parked car is never in the way.
         let right = StandOff {
             rel_pos: Vec2::new(-4.0, -3.5),
             rel_heading: 0.0,
         };
-        assert_eq!(path(&parked).blocked_at(&params, right, 4.0, 0.5), None);
+        assert_eq!(
+            path(&parked).blocked_at(&params, right, (0.0, 4.0), 0.5),
+            None
+        );
     }
 }

@@ -783,8 +783,9 @@ impl Planner {
 
     /// Whether the bullet's stand-off pose on `side` beside the predicted target
     /// (`self.xs`: the free prediction) would come within the obstacle clearance of an
-    /// obstacle before the push it chases for is over (its earliest arrival, the window and
-    /// [`chase::FALL_BACK`], at most [`chase::LOOK`] ahead).
+    /// obstacle while the bullet is beside the target: from [`chase::BESIDE`] before its
+    /// earliest arrival until the push it chases for is over (the window and
+    /// [`chase::FALL_BACK`] after the arrival, at most [`chase::LOOK`] ahead).
     fn stand_off_blocked(&self, side: Side, input: &PlannerInput<'_>) -> bool {
         let s = &self.settings;
         let (t_arr, x_c) = self.earliest_arrival(side, &input.target, &input.bullet);
@@ -800,7 +801,8 @@ impl Planner {
             rel_pos: Vec2::new(c.rel_pos.x, c.rel_pos.y + side.sign() * s.standoff),
             rel_heading: 0.0,
         };
-        path.blocked_at(&self.params, stand, horizon, s.obstacle_clearance)
+        let from = (t_arr - chase::BESIDE).clamp(0.0, horizon);
+        path.blocked_at(&self.params, stand, (from, horizon), s.obstacle_clearance)
             .is_some()
     }
 
