@@ -21,6 +21,7 @@
 //! after construction.
 
 use crate::approach::{Profile, BRAKE_MARGIN};
+use crate::chase;
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 use crate::race;
 use crate::settings::{length_scale, ContactPointModel, PlannerSettings, TargetDriverModel};
@@ -720,6 +721,10 @@ impl Planner {
                 self.setup_candidate(side, self.n, lane);
                 self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
                 self.fill_package(mode, infeasible, None, lane, input);
+                // `self.xs` is the free prediction now.
+                if self.stand_off_blocked(side, input) {
+                    self.hold_back(input);
+                }
             }
         }
         self.package.race_lost = race_lost;
@@ -774,6 +779,47 @@ impl Planner {
             c.rel_pos.y + side.sign() * (self.settings.standoff + 0.5 * self.params.bullet.width);
         let p = pose.world_from_body(Vec2::new(c.rel_pos.x, outer));
         input.road.half_width() - input.road.project(p).d.abs()
+    }
+
+    /// Whether the bullet's stand-off pose on `side` beside the predicted target
+    /// (`self.xs`: the free prediction) would come within the obstacle clearance of an
+    /// obstacle while the bullet is beside the target: from [`chase::BESIDE`] before its
+    /// earliest arrival until the push it chases for is over (the window and
+    /// [`chase::FALL_BACK`] after the arrival, at most [`chase::LOOK`] ahead).
+    fn stand_off_blocked(&self, side: Side, input: &PlannerInput<'_>) -> bool {
+        let s = &self.settings;
+        let (t_arr, x_c) = self.earliest_arrival(side, &input.target, &input.bullet);
+        let horizon = (t_arr + self.w as f64 * s.dt + chase::FALL_BACK).min(chase::LOOK);
+        let c = self.contact_pose_at(side, x_c);
+        let path = chase::Path {
+            xs: &self.xs,
+            dt: s.dt,
+            time: input.time,
+            obstacles: input.obstacles,
+        };
+        let stand = chase::StandOff {
+            rel_pos: Vec2::new(c.rel_pos.x, c.rel_pos.y + side.sign() * s.standoff),
+            rel_heading: 0.0,
+        };
+        let from = (t_arr - chase::BESIDE).clamp(0.0, horizon);
+        path.blocked_at(&self.params, stand, (from, horizon), s.obstacle_clearance)
+            .is_some()
+    }
+
+    /// Make the package's chase hold back behind the target: its approach goes to
+    /// [`crate::href::HOLD_BACK`] behind the contact station.
+    fn hold_back(&mut self, input: &PlannerInput<'_>) {
+        let s = &self.settings;
+        let p = &mut self.package;
+        p.hold_back = true;
+        p.approach = Profile::with_brake_margin(
+            crate::href::relative_position(&input.target, &input.bullet).x,
+            crate::href::relative_velocity(&input.target, &input.bullet).x,
+            p.contact_rel_pos.x - crate::href::HOLD_BACK * self.len_scale,
+            s.approach_accel(self.mu),
+            s.approach_speed,
+            BRAKE_MARGIN,
+        );
     }
 
     /// Whether the bullet can line up on `side` inside the road (with the road margin).
@@ -1291,6 +1337,7 @@ impl Planner {
         p.mode = mode;
         p.infeasible = infeasible;
         p.race_lost = false;
+        p.hold_back = false;
         p.time = input.time;
         p.side = self.side;
         p.contact_point = self.contact_point;

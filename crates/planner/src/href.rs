@@ -9,6 +9,10 @@ use dynamics::target::idx;
 use dynamics::TargetState;
 use mpc::{Reference, StageReference};
 
+/// How far behind its contact station (m, full size; × the length scale) a bullet drops
+/// back: fully behind the target's rear bumper, where the target's own lane is its path.
+pub const HOLD_BACK: f64 = 2.5;
+
 /// The bullet's position relative to the target, in the target's frame.
 #[must_use]
 pub fn relative_position(xt: &TargetState, xb: &BulletState) -> Vec2 {
@@ -79,7 +83,7 @@ pub fn fill_reference(
     };
     let stand = Vec2::new(contact.rel_pos.x, contact.rel_pos.y + side * s.standoff);
     // Fully behind the target's rear bumper (the contact station is at its rear quarter).
-    let behind_x = contact.rel_pos.x - 2.5 * ls;
+    let behind_x = contact.rel_pos.x - HOLD_BACK * ls;
     let back = StageReference {
         rel_pos: Vec2::new(
             contact.rel_pos.x - 3.0 * ls,
@@ -130,7 +134,15 @@ pub fn fill_reference(
         // An infeasible decision while chasing: keep station behind (the controller aborts
         // after its patience).
         Mode::Chase | Mode::Abort => {
-            let approach = Approach::new(pkg, rel, stand, time, s, behind_x, ls);
+            // Held back (the stand-off pose is blocked ahead): behind the target, on its
+            // line, moving across only once behind it.
+            let goal = if pkg.hold_back {
+                Vec2::new(behind_x, 0.0)
+            } else {
+                stand
+            };
+            let mut approach = Approach::new(pkg, rel, goal, time, s, behind_x, ls);
+            approach.across_behind = pkg.hold_back;
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
                 *st = approach.stage(tau);
@@ -165,6 +177,8 @@ struct Approach {
     lateral_speed: f64,
     behind_x: f64,
     length_scale: f64,
+    /// Hold the current lateral position until the bullet is behind `behind_x`.
+    across_behind: bool,
 }
 
 impl Approach {
@@ -186,13 +200,18 @@ impl Approach {
             lateral_speed: s.lateral_speed,
             behind_x,
             length_scale,
+            across_behind: false,
         }
     }
 
     /// The stage at time `tau`.
     fn stage(&self, tau: f64) -> StageReference {
         let (rel, goal) = (self.rel, self.goal);
-        let reach = self.lateral_speed * (tau - self.time).max(0.0);
+        let reach = if self.across_behind && rel.x > self.behind_x {
+            0.0
+        } else {
+            self.lateral_speed * (tau - self.time).max(0.0)
+        };
         let y = rel.y + (goal.y - rel.y).clamp(-reach, reach);
         let (mut x, mut v) = self.along.at(tau - self.along_from);
         if (goal.y - y).abs() > self.length_scale {

@@ -13,6 +13,7 @@
 //! `docs/planner.md` gives the formulation and the measurements.
 
 pub mod approach;
+mod chase;
 pub mod controller;
 pub mod decision;
 pub mod href;

@@ -85,6 +85,11 @@ pub struct DecisionPackage {
     /// road or hits an obstacle before the bullet can begin a push on any side, so no
     /// later plan can do better and the controller gives up at once.
     pub race_lost: bool,
+    /// While chasing (`mode` [`Mode::Chase`] or [`Mode::Abort`]): the stand-off pose beside
+    /// the target runs into an obstacle before the push could be over, so
+    /// the bullet holds back behind the target ([`crate::href::HOLD_BACK`]) instead of
+    /// waiting beside it.
+    pub hold_back: bool,
     /// Planning time (s).
     pub time: f64,
     pub side: Side,
@@ -135,6 +140,7 @@ impl DecisionPackage {
             mode: Mode::Chase,
             infeasible: None,
             race_lost: false,
+            hold_back: false,
             time: 0.0,
             side: Side::Left,
             contact_point: Vec2::zeros(),

@@ -522,3 +522,65 @@ fn a_target_that_fails_before_any_push_can_begin_is_a_lost_race() {
     assert!(pkg.predicted_road_margin < -1.0, "held, it leaves the road");
     assert!(!pkg.race_lost, "{:?}", pkg.mode);
 }
+
+/// A car parked in the next lane on the bullet's side, 60 m ahead of the target: the
+/// bullet, chasing 12 m behind, would be beside the target (some 4 s from now), in that
+/// lane, when the target passes it, so its chase holds back behind the target
+/// (`hold_back`), and the MPC's reference keeps it in its lane until it is behind the
+/// target's rear, then takes it across to the target's line. A car 25 m ahead is passed
+/// before the bullet is beside the target, and without a car it waits on its stand-off
+/// line beside the target.
+#[test]
+fn a_stand_off_line_blocked_ahead_holds_the_chase_back() {
+    use planner::href::{fill_reference, Timing, HOLD_BACK};
+    let s = PlannerSettings::default();
+    let road = road();
+    let mut p = planner(s.clone());
+    let ry = road.lane_center_offset(2) - road.lane_center_offset(1);
+    let (xt, xb) = states(&road, -12.0, ry, 15.0, 15.0);
+    let parked = |ahead: f64| {
+        [Obstacle {
+            x: xt[6] + ahead,
+            y: xt[7] + ry,
+            heading: 0.0,
+            vx: 0.0,
+            vy: 0.0,
+            length: 4.5,
+            width: 1.8,
+        }]
+    };
+    let free = p.plan(&input(&road, &[], xt, xb)).unwrap().clone();
+    assert_eq!(free.mode, Mode::Chase);
+    assert!(!free.hold_back);
+    let passed = parked(25.0);
+    let early = p.plan(&input(&road, &passed, xt, xb)).unwrap();
+    assert_eq!(early.mode, Mode::Chase);
+    assert!(!early.hold_back);
+    let parked = parked(60.0);
+    let pkg = p.plan(&input(&road, &parked, xt, xb)).unwrap().clone();
+    assert_eq!(pkg.mode, Mode::Chase);
+    assert!(pkg.hold_back);
+
+    let timing = Timing {
+        time: 3.0,
+        dt: 0.05,
+        pit_frame: None,
+        length_scale: 1.0,
+    };
+    let behind = pkg.contact_rel_pos.x - HOLD_BACK;
+    let mut r = mpc::Reference::new(20);
+    // 12 m behind, beyond the hold-back station: across to the target's line at once.
+    fill_reference(&pkg, &s, &mut r, &xt, &xb, timing);
+    let last = r.stages.last().unwrap().rel_pos;
+    assert!(last.y < ry - 0.5 && last.x <= behind + 1e-9, "{last:?}");
+    // Beside the target: kept in its lane, dropping back.
+    let (_, beside) = states(&road, -3.0, ry, 15.0, 15.0);
+    fill_reference(&pkg, &s, &mut r, &xt, &beside, timing);
+    assert!(r
+        .stages
+        .iter()
+        .all(|st| (st.rel_pos.y - ry).abs() < 1e-9 && st.rel_pos.x <= -3.0 + 1e-9));
+    // The free package waits beside the target.
+    fill_reference(&free, &s, &mut r, &xt, &beside, timing);
+    assert!(r.stages.iter().all(|st| st.rel_pos.y > 1.0));
+}
