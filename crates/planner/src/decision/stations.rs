@@ -1,0 +1,207 @@
+//! Where the bullet pushes and when it can: its contact poses along the target's rear
+//! quarter, where it touches, its earliest arrival at a station (the approach profile), and
+//! which sides are open to it (room beside the target, obstacles along the stand-off pose,
+//! holding back).
+
+use super::*;
+
+impl Planner {
+    /// The bullet's contact pose on `side` (target frame) at the current candidate's contact
+    /// point.
+    pub(super) fn contact_pose(&self, side: Side) -> mpc::StageReference {
+        self.contact_pose_at(side, self.contact_x)
+    }
+
+    /// The bullet's contact pose on `side` (target frame) at the contact point's body x `x_c`.
+    pub(super) fn contact_pose_at(&self, side: Side, x_c: f64) -> mpc::StageReference {
+        let s = &self.settings;
+        pit_stage_at(
+            &self.params,
+            side,
+            x_c,
+            s.contact_angle,
+            s.overlap,
+            s.push_speed,
+            (0.0, self.force_max),
+        )
+    }
+
+    /// The contact point's body x for offset `offset` from the rear quarter (clamped as
+    /// [`Self::clamp_contact_x`]).
+    pub(super) fn contact_x_at(&self, offset: f64) -> f64 {
+        self.clamp_contact_x(rear_quarter_x(&self.params) + offset)
+    }
+
+    /// A contact point's body x clamped to the target's side, at least 0.2 m (full size;
+    /// × the length scale) from either bumper.
+    pub(super) fn clamp_contact_x(&self, x: f64) -> f64 {
+        let t = &self.params.target;
+        let clear = 0.2 * self.len_scale;
+        x.clamp(-(t.length - t.cg_to_front) + clear, t.cg_to_front - clear)
+    }
+
+    /// Where the bullet touches the target now (`pair`: the footprints' geometry, bullet
+    /// first), as the contact point's body x (clamped as [`Self::clamp_contact_x`]), when a
+    /// plan in contact puts its force there (`contact_point_in_contact = touch`) and the
+    /// footprints are within 0.1 m (× the length scale); `None` otherwise.
+    pub(super) fn touch_x(&self, pair: &PairGeometry, xt: &TargetState) -> Option<f64> {
+        if self.settings.contact_point_in_contact != ContactPointModel::Touch
+            || pair.gap >= 0.1 * self.len_scale
+        {
+            return None;
+        }
+        let x = Pose2::new(xt[idx::X], xt[idx::Y], xt[idx::PSI])
+            .body_from_world(pair.point_b)
+            .x;
+        Some(self.clamp_contact_x(x))
+    }
+
+    /// Earliest time (s from now) the bullet can be at a contact pose on `side`, and the
+    /// contact point's body x there. The contact point is the one of the band the planner
+    /// tries (`contact_offsets` from the rear quarter) nearest to where the bullet would come
+    /// to rest relative to the target if it braked now: a bullet waiting a little behind the
+    /// rear-quarter station, or one that will stop a little short of it, is already at a
+    /// station. The time is the approach along the target ([`Profile`], from the bullet's
+    /// relative position and speed, arriving at rest relative to the target), moving across
+    /// at `lateral_speed` at the same time, plus a settling time; crossing behind the target
+    /// to the other side first drops back behind its rear bumper.
+    pub(super) fn earliest_arrival(
+        &self,
+        side: Side,
+        xt: &TargetState,
+        xb: &BulletState,
+    ) -> (f64, f64) {
+        let s = &self.settings;
+        let x0 = self.contact_x_at(0.0);
+        let (lo, hi) = s
+            .contact_offsets
+            .iter()
+            .map(|&o| self.contact_x_at(o))
+            .fold((x0, x0), |(lo, hi), x| (lo.min(x), hi.max(x)));
+        let c = self.contact_pose_at(side, x0);
+        let rel = crate::href::relative_position(xt, xb);
+        let rel_vel = crate::href::relative_velocity(xt, xb);
+        let (a, cap) = (s.approach_accel(self.mu), s.approach_speed);
+        let stop = rel.x + rel_vel.x * rel_vel.x.abs() / (2.0 * a);
+        let x_c = (x0 + stop - c.rel_pos.x).clamp(lo, hi);
+        let goal = c.rel_pos.x + x_c - x0;
+        let dx = (goal - rel.x).abs();
+        let dy = (c.rel_pos.y - rel.y).abs();
+        let k = self.len_scale;
+        // A bullet waiting within `ARRIVAL_TOL` of the band (the MPC holds it a few tenths of
+        // a metre off its station, drifting at a few tenths of a metre per second) has
+        // arrived along the target once it stops: the turn-in closes the rest; at the
+        // approach's gentle acceleration on low adhesion, closing it first would take longer
+        // than the look-ahead leaves for a window. One still closing in has not.
+        let tol = ARRIVAL_TOL * k;
+        let (band_lo, band_hi) = (c.rel_pos.x + lo - x0 - tol, c.rel_pos.x + hi - x0 + tol);
+        let waiting = rel_vel.x.abs() < ARRIVAL_TOL * k.sqrt();
+        let goal_along = if waiting && (band_lo..=band_hi).contains(&rel.x) {
+            stop.clamp(band_lo, band_hi)
+        } else {
+            goal
+        };
+        if dx.hypot(dy) < 0.3 * k || self.gap(xt, xb) < 0.1 * k {
+            // At the contact pose, or touching already: a PIT under way.
+            return (0.0, x_c);
+        }
+        let along = if side.sign() * rel.y < 0.0 {
+            // On the other side: drop back behind the target's rear first.
+            let behind = -(self.params.target.length - self.params.target.cg_to_front)
+                - self.params.bullet.cg_to_front
+                - 0.5 * k;
+            Profile::new(rel.x, rel_vel.x, behind.min(rel.x), a, cap).time()
+                + Profile::new(behind.min(rel.x), 0.0, goal_along, a, cap).time()
+        } else {
+            Profile::new(rel.x, rel_vel.x, goal_along, a, cap).time()
+        };
+        (s.settle_time + along.max(dy / s.lateral_speed), x_c)
+    }
+
+    /// Lateral room (m) the bullet has on `side` at its stand-off pose beside the target's
+    /// rear quarter: the road margin of that pose's outer edge (negative: over the edge).
+    pub(super) fn side_room(&self, side: Side, input: &PlannerInput<'_>) -> f64 {
+        let c = self.contact_pose(side);
+        let pose = Pose2::new(
+            input.target[idx::X],
+            input.target[idx::Y],
+            input.target[idx::PSI],
+        );
+        let outer =
+            c.rel_pos.y + side.sign() * (self.settings.standoff + 0.5 * self.params.bullet.width);
+        let p = pose.world_from_body(Vec2::new(c.rel_pos.x, outer));
+        input.road.half_width() - input.road.project(p).d.abs()
+    }
+
+    /// Whether the bullet's stand-off pose on `side` beside the predicted target
+    /// (`self.xs`: the free prediction) would come within the obstacle clearance of an
+    /// obstacle while the bullet is beside the target: from [`chase::BESIDE`] before its
+    /// earliest arrival until the push it chases for is over (the window and
+    /// [`chase::FALL_BACK`] after the arrival, at most [`chase::LOOK`] ahead).
+    pub(super) fn stand_off_blocked(&self, side: Side, input: &PlannerInput<'_>) -> bool {
+        let s = &self.settings;
+        let (t_arr, x_c) = self.earliest_arrival(side, &input.target, &input.bullet);
+        let horizon = (t_arr + self.w as f64 * s.dt + chase::FALL_BACK).min(chase::LOOK);
+        let c = self.contact_pose_at(side, x_c);
+        let path = chase::Path {
+            xs: &self.xs,
+            dt: s.dt,
+            time: input.time,
+            obstacles: input.obstacles,
+        };
+        let stand = chase::StandOff {
+            rel_pos: Vec2::new(c.rel_pos.x, c.rel_pos.y + side.sign() * s.standoff),
+            rel_heading: 0.0,
+        };
+        let from = (t_arr - chase::BESIDE).clamp(0.0, horizon);
+        path.blocked_at(&self.params, stand, (from, horizon), s.obstacle_clearance)
+            .is_some()
+    }
+
+    /// Make the package's chase hold back behind the target: its approach goes to
+    /// [`crate::href::HOLD_BACK`] behind the contact station.
+    pub(super) fn hold_back(&mut self, input: &PlannerInput<'_>) {
+        let s = &self.settings;
+        let p = &mut self.package;
+        p.hold_back = true;
+        p.approach = Profile::with_brake_margin(
+            crate::href::relative_position(&input.target, &input.bullet).x,
+            crate::href::relative_velocity(&input.target, &input.bullet).x,
+            p.contact_rel_pos.x - crate::href::HOLD_BACK * self.len_scale,
+            s.approach_accel(self.mu),
+            s.approach_speed,
+            BRAKE_MARGIN,
+        );
+    }
+
+    /// Whether the bullet can line up on `side` inside the road (with the road margin).
+    pub(super) fn side_open(&self, side: Side, input: &PlannerInput<'_>) -> bool {
+        self.side_room(side, input) >= self.settings.road_margin
+    }
+
+    /// The side the bullet works on when no candidate decides it: the side it is on, unless
+    /// the road leaves no room there and does on the other side.
+    pub(super) fn bullet_side(&self, input: &PlannerInput<'_>) -> Side {
+        let rel = Pose2::new(
+            input.target[idx::X],
+            input.target[idx::Y],
+            input.target[idx::PSI],
+        )
+        .body_from_world(Vec2::new(input.bullet[0], input.bullet[1]));
+        let own = if rel.y >= 0.0 {
+            Side::Left
+        } else {
+            Side::Right
+        };
+        let other = if own == Side::Left {
+            Side::Right
+        } else {
+            Side::Left
+        };
+        if !self.side_open(own, input) && self.side_open(other, input) {
+            other
+        } else {
+            own
+        }
+    }
+}
