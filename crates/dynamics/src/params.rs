@@ -596,29 +596,37 @@ mod tests {
         out
     }
 
-    #[test]
-    fn every_numeric_field_refuses_nan_and_names_itself() {
-        // Property over the whole schema: any numeric field set to NaN (or inf) is refused
-        // with an error that names exactly that field, in every table, for both sets.
+    /// Every `(table, key)` of a parameter file whose value is a number.
+    fn numeric_fields(src: &str) -> Vec<(String, String)> {
+        let mut table = String::new();
+        let mut out = Vec::new();
+        for line in src.lines() {
+            let t = line.trim();
+            if t.starts_with('[') {
+                table = t.trim_matches(|c| c == '[' || c == ']').to_owned();
+                continue;
+            }
+            let Some((key, value)) = t.split_once('=') else {
+                continue;
+            };
+            let value = value.split('#').next().unwrap().trim();
+            if value.replace('_', "").parse::<f64>().is_ok() {
+                out.push((table.clone(), key.trim().to_owned()));
+            }
+        }
+        out
+    }
+
+    /// Sets every numeric field of both built-in sets to each of `bads` in turn and asserts
+    /// the error names exactly that field.
+    fn every_numeric_field_refuses(bads: &[&str]) {
         for set in ParamSet::BUILTIN {
             let src = ParamSet::builtin_source(set).unwrap();
-            let mut table = String::new();
-            let mut checked = 0;
-            for line in src.lines() {
-                let t = line.trim();
-                if t.starts_with('[') {
-                    table = t.trim_matches(|c| c == '[' || c == ']').to_owned();
-                    continue;
-                }
-                let Some((key, value)) = t.split_once('=') else {
-                    continue;
-                };
-                let (key, value) = (key.trim(), value.split('#').next().unwrap().trim());
-                if value.parse::<f64>().is_err() && value.replace('_', "").parse::<f64>().is_err() {
-                    continue; // strings
-                }
-                for bad in ["nan", "inf", "-inf"] {
-                    let text = replace_line(src, &table, key, Some(&format!("{key} = {bad}")));
+            let fields = numeric_fields(src);
+            assert!(fields.len() > 80, "{set}: only {} fields", fields.len());
+            for (table, key) in &fields {
+                for bad in bads {
+                    let text = replace_line(src, table, key, Some(&format!("{key} = {bad}")));
                     let err = ParamSet::from_toml_str(&text, "prop.toml")
                         .unwrap_err()
                         .to_string();
@@ -628,48 +636,22 @@ mod tests {
                         "{set}: {field} = {bad} gave {err:?}"
                     );
                 }
-                checked += 1;
             }
-            assert!(checked > 80, "{set}: only {checked} fields checked");
         }
+    }
+
+    #[test]
+    fn every_numeric_field_refuses_nan_and_names_itself() {
+        // Property over the whole schema: any numeric field set to NaN (or inf) is refused
+        // with an error that names exactly that field, in every table, for both sets.
+        every_numeric_field_refuses(&["nan", "inf", "-inf"]);
     }
 
     #[test]
     fn every_numeric_field_refuses_absurd_magnitudes_and_names_itself() {
         // Finite but absurd: ±1e308 in any field is outside its physical range, refused with
         // an error naming exactly that field.
-        for set in ParamSet::BUILTIN {
-            let src = ParamSet::builtin_source(set).unwrap();
-            let mut table = String::new();
-            let mut checked = 0;
-            for line in src.lines() {
-                let t = line.trim();
-                if t.starts_with('[') {
-                    table = t.trim_matches(|c| c == '[' || c == ']').to_owned();
-                    continue;
-                }
-                let Some((key, value)) = t.split_once('=') else {
-                    continue;
-                };
-                let (key, value) = (key.trim(), value.split('#').next().unwrap().trim());
-                if value.parse::<f64>().is_err() {
-                    continue; // strings
-                }
-                for bad in ["1e308", "-1e308"] {
-                    let text = replace_line(src, &table, key, Some(&format!("{key} = {bad}")));
-                    let err = ParamSet::from_toml_str(&text, "prop.toml")
-                        .unwrap_err()
-                        .to_string();
-                    let field = format!("{table}.{key}");
-                    assert!(
-                        err.starts_with(&field),
-                        "{set}: {field} = {bad} gave {err:?}"
-                    );
-                }
-                checked += 1;
-            }
-            assert!(checked > 80, "{set}: only {checked} fields checked");
-        }
+        every_numeric_field_refuses(&["1e308", "-1e308"]);
     }
 
     #[test]
