@@ -29,6 +29,6 @@ pub use decision::{Judgement, PlanError, Planner, PlannerError, PlannerInput, MA
 pub use package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 pub use phase::{AbortReason, Phase, PhaseMachine, PhaseObservation};
 pub use settings::{
-    length_scale, ContactPointModel, ControllerSettings, PhaseSettings, PlanWeights,
-    PlannerSettings, SettingsError, TargetDriverModel, TUNED_BULLET_LENGTH,
+    length_scale, ControllerSettings, PhaseSettings, PlanWeights, PlannerSettings, SettingsError,
+    TargetDriverModel, TUNED_BULLET_LENGTH,
 };

@@ -102,10 +102,6 @@ pub struct PlannerSettings {
     /// point 0.3 m behind the rear axle; negative is further back), on the best side and
     /// window.
     pub contact_offsets: Vec<f64>,
-    /// The contact point of a plan made in contact: `touch` (where the footprints touch
-    /// now, body x along the target's side) or `rear_quarter` (the rear-quarter point, as
-    /// before contact).
-    pub contact_point_in_contact: ContactPointModel,
     /// SCP iterations per candidate.
     pub scp_iterations: u32,
     /// The road, obstacle rows are imposed at every `row_stride`-th step (and the last).
@@ -180,17 +176,6 @@ pub enum TargetDriverModel {
     LaneKeep,
 }
 
-/// Where a plan made in contact puts the virtual force.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ContactPointModel {
-    /// The rear-quarter point (`contact_offsets`' zero), wherever the bullet touches.
-    #[default]
-    RearQuarter,
-    /// Where the two footprints touch when the plan is made.
-    Touch,
-}
-
 impl Default for PlannerSettings {
     fn default() -> Self {
         Self {
@@ -202,7 +187,6 @@ impl Default for PlannerSettings {
             start_offsets: vec![0.0, 0.3],
             try_both_sides: true,
             contact_offsets: vec![0.0, -0.4],
-            contact_point_in_contact: ContactPointModel::RearQuarter,
             scp_iterations: 3,
             row_stride: 2,
             force_max_g: 3.0,
@@ -597,10 +581,6 @@ mod tests {
             ("[planner]\ncheck_horizon = 1e9", "check_horizon"),
             ("[planner]\ncheck_horizon = -1.0", "check_horizon"),
             ("[planner]\ntarget_driver = \"psychic\"", "target_driver"),
-            (
-                "[planner]\ncontact_point_in_contact = \"middle\"",
-                "contact_point_in_contact",
-            ),
         ];
         for (text, field) in cases {
             let e = ControllerSettings::from_toml_str(text)
@@ -615,9 +595,5 @@ mod tests {
         let s =
             ControllerSettings::from_toml_str("[planner]\ntarget_driver = \"lane_keep\"").unwrap();
         assert_eq!(s.planner.target_driver, TargetDriverModel::LaneKeep);
-        let s =
-            ControllerSettings::from_toml_str("[planner]\ncontact_point_in_contact = \"touch\"")
-                .unwrap();
-        assert_eq!(s.planner.contact_point_in_contact, ContactPointModel::Touch);
     }
 }

@@ -8,9 +8,7 @@ use dynamics::road::{Obstacle, Road};
 use dynamics::target4dof::FourDofTarget;
 use dynamics::{TargetInput, TargetState};
 use planner::decision::wrap;
-use planner::{
-    ContactPointModel, DecisionPackage, Infeasible, Mode, Planner, PlannerInput, PlannerSettings,
-};
+use planner::{DecisionPackage, Infeasible, Mode, Planner, PlannerInput, PlannerSettings};
 
 fn params() -> ParamSet {
     ParamSet::builtin("full_size").unwrap()
@@ -273,10 +271,9 @@ fn bad_input_is_an_error_not_a_panic() {
 }
 
 /// A plan made while the bullet touches the target puts its force at the rear-quarter
-/// point by default, and where the footprints touch with `contact_point_in_contact = touch`
-/// (the bullet's inner front corner here, 0.9 m ahead of the rear quarter).
+/// point, wherever the bullet touches (here its inner front corner, 0.9 m ahead of it).
 #[test]
-fn a_plan_in_contact_can_push_where_the_bullet_touches() {
+fn a_plan_in_contact_pushes_at_the_rear_quarter_point() {
     let p = params();
     let road = road();
     let (mut xt, _) = states(&road, -6.0, 3.0, 20.0, 21.0);
@@ -302,27 +299,18 @@ fn a_plan_in_contact_can_push_where_the_bullet_touches() {
         0.0,
         0.0,
     ]);
-    for (model, want, tol) in [
-        (ContactPointModel::RearQuarter, x_rq, 1e-9),
-        (ContactPointModel::Touch, x_touch, 0.05),
-    ] {
-        let settings = PlannerSettings {
-            contact_point_in_contact: model,
-            ..PlannerSettings::default()
-        };
-        let mut pl = planner(settings);
-        let mut inp = input(&road, &[], xt, xb);
-        inp.side = Some(mpc::Side::Left);
-        inp.best_effort = true;
-        let pkg = pl.plan(&inp).unwrap();
-        assert_eq!(pkg.mode, Mode::Pit, "{model:?}: {pkg:?}");
-        assert!(
-            (pkg.contact_point.x - want).abs() <= tol,
-            "{model:?}: contact point x {} against {want}",
-            pkg.contact_point.x
-        );
-        assert!(pkg.contact_point.y > 0.0, "left side");
-    }
+    let mut pl = planner(PlannerSettings::default());
+    let mut inp = input(&road, &[], xt, xb);
+    inp.side = Some(mpc::Side::Left);
+    inp.best_effort = true;
+    let pkg = pl.plan(&inp).unwrap();
+    assert_eq!(pkg.mode, Mode::Pit, "{pkg:?}");
+    assert!(
+        (pkg.contact_point.x - x_rq).abs() <= 1e-9,
+        "contact point x {} against {x_rq}",
+        pkg.contact_point.x
+    );
+    assert!(pkg.contact_point.y > 0.0, "left side");
 }
 
 /// `Planner::judge` is the plan's own verdict: judging the push a plan chose (its side,

@@ -24,7 +24,7 @@ use crate::approach::{Profile, BRAKE_MARGIN};
 use crate::chase;
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 use crate::race;
-use crate::settings::{length_scale, ContactPointModel, PlannerSettings, TargetDriverModel};
+use crate::settings::{length_scale, PlannerSettings, TargetDriverModel};
 use dynamics::bullet::BulletState;
 use dynamics::driver::LaneKeeper;
 use dynamics::geometry::{rotate, Obb, Pose2, Vec2};
@@ -514,7 +514,6 @@ impl Planner {
         // Where the vehicles touch, if they do: the contact point of a plan in contact.
         let pair = self.pair(&input.target, &input.bullet);
         let touching = pair.gap < 0.1 * self.len_scale;
-        let touch_x = self.touch_x(&pair, &input.target);
         for &side in sides {
             // No room for the bullet beside the target on this side: not a candidate (a
             // committed side in contact is kept).
@@ -542,7 +541,7 @@ impl Planner {
                     continue;
                 }
                 candidates += 1;
-                self.contact_x = touch_x.unwrap_or(x_arr);
+                self.contact_x = x_arr;
                 if let Some(o) = self.evaluate(side, k0, lane, input) {
                     self.rank(o, &mut best, &mut best_any, &mut feasible);
                 }

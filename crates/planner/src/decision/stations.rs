@@ -40,22 +40,6 @@ impl Planner {
         x.clamp(-(t.length - t.cg_to_front) + clear, t.cg_to_front - clear)
     }
 
-    /// Where the bullet touches the target now (`pair`: the footprints' geometry, bullet
-    /// first), as the contact point's body x (clamped as [`Self::clamp_contact_x`]), when a
-    /// plan in contact puts its force there (`contact_point_in_contact = touch`) and the
-    /// footprints are within 0.1 m (× the length scale); `None` otherwise.
-    pub(super) fn touch_x(&self, pair: &PairGeometry, xt: &TargetState) -> Option<f64> {
-        if self.settings.contact_point_in_contact != ContactPointModel::Touch
-            || pair.gap >= 0.1 * self.len_scale
-        {
-            return None;
-        }
-        let x = Pose2::new(xt[idx::X], xt[idx::Y], xt[idx::PSI])
-            .body_from_world(pair.point_b)
-            .x;
-        Some(self.clamp_contact_x(x))
-    }
-
     /// Earliest time (s from now) the bullet can be at a contact pose on `side`, and the
     /// contact point's body x there. The contact point is the one of the band the planner
     /// tries (`contact_offsets` from the rear quarter) nearest to where the bullet would come
