@@ -30,5 +30,5 @@ pub use package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 pub use phase::{AbortReason, Phase, PhaseMachine, PhaseObservation};
 pub use settings::{
     length_scale, ControllerSettings, PhaseSettings, PlanWeights, PlannerSettings, SettingsError,
-    TargetDriverModel, TUNED_BULLET_LENGTH,
+    TUNED_BULLET_LENGTH,
 };

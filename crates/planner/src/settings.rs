@@ -142,10 +142,6 @@ pub struct PlannerSettings {
     /// The free slide after the look-ahead (s): each candidate's prediction is rolled on
     /// without force for this long, and its footprint must stay inside the road (0: off).
     pub check_horizon: f64,
-    /// The target driver in the rollout: `held` (its current command, held) or
-    /// `lane_keep` (a lane keeper of the line the target is on, gain 1, its brake held;
-    /// `docs/planner.md`).
-    pub target_driver: TargetDriverModel,
     /// Deceleration of the spun target for the post-PIT stopping point while its tyres slide
     /// sideways (fraction of μ g; rolling along its body it slows only by its rolling
     /// resistance and driveline, `Planner`'s stopping model).
@@ -162,18 +158,6 @@ pub struct PlannerSettings {
     pub weights: PlanWeights,
     /// Clarabel settings of the planner's QPs.
     pub qp: mpc::settings::QpSettings,
-}
-
-/// What the planner's rollout assumes the target's driver does.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TargetDriverModel {
-    /// The driver's current command, held over the look-ahead.
-    #[default]
-    Held,
-    /// A lane keeper (`dynamics::driver::LaneKeeper`) of the line the target is on when
-    /// the plan starts, gain 1; the brake command is held.
-    LaneKeep,
 }
 
 impl Default for PlannerSettings {
@@ -207,7 +191,6 @@ impl Default for PlannerSettings {
             heading_tol: 0.6,
             yaw_decay: 0.4,
             check_horizon: 0.0,
-            target_driver: TargetDriverModel::Held,
             stop_decel_fraction: 0.7,
             road_margin: 0.0,
             obstacle_clearance: 0.5,
@@ -580,7 +563,6 @@ mod tests {
             ("[mpc]\nhorizon = 1", "horizon"),
             ("[planner]\ncheck_horizon = 1e9", "check_horizon"),
             ("[planner]\ncheck_horizon = -1.0", "check_horizon"),
-            ("[planner]\ntarget_driver = \"psychic\"", "target_driver"),
         ];
         for (text, field) in cases {
             let e = ControllerSettings::from_toml_str(text)
@@ -592,8 +574,5 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("horizn"), "{e}");
-        let s =
-            ControllerSettings::from_toml_str("[planner]\ntarget_driver = \"lane_keep\"").unwrap();
-        assert_eq!(s.planner.target_driver, TargetDriverModel::LaneKeep);
     }
 }

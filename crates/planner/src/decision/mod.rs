@@ -24,7 +24,7 @@ use crate::approach::{Profile, BRAKE_MARGIN};
 use crate::chase;
 use crate::package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 use crate::race;
-use crate::settings::{length_scale, PlannerSettings, TargetDriverModel};
+use crate::settings::{length_scale, PlannerSettings};
 use dynamics::bullet::BulletState;
 use dynamics::driver::LaneKeeper;
 use dynamics::geometry::{rotate, Obb, Pose2, Vec2};
@@ -177,8 +177,8 @@ pub struct Planner {
     contact_x: f64,
     psi_rev: f64,
     input_u: TargetInput,
-    /// The target driver of the rollout (`PlannerSettings::target_driver`): `None` holds
-    /// `input_u`.
+    /// The target driver of the rollout: `None` holds `input_u` (the push's rollouts); the
+    /// race test rolls the free motion out under a lane keeper too.
     lane_keeper: Option<LaneKeeper>,
     time: f64,
 }
@@ -378,7 +378,7 @@ impl Planner {
     fn begin(&mut self, input: &PlannerInput<'_>) -> f64 {
         self.time = input.time;
         self.input_u = input.target_input;
-        self.lane_keeper = self.driver_model(input);
+        self.lane_keeper = None;
         self.contact_x = self.contact_x_at(0.0);
         input
             .road

@@ -28,15 +28,6 @@ impl Planner {
         }
     }
 
-    /// The rollout's target driver for this plan: a lane keeper of the lane centre nearest
-    /// the target (gain 1), or `None` to hold the current command.
-    pub(super) fn driver_model(&self, input: &PlannerInput<'_>) -> Option<LaneKeeper> {
-        match self.settings.target_driver {
-            TargetDriverModel::Held => None,
-            TargetDriverModel::LaneKeep => Some(self.lane_keeper_of(input)),
-        }
-    }
-
     /// A lane keeper (gain 1) of the lane centre nearest to the target now.
     pub(super) fn lane_keeper_of(&self, input: &PlannerInput<'_>) -> LaneKeeper {
         let road = input.road;
