@@ -165,8 +165,9 @@ pub struct EpisodeConfig {
     /// The controller's target surrogate (planner and MPC alike, unless `planner_model`).
     pub model: ModelKind,
     /// The upper layer's surrogate when it differs from `model`, which then serves the MPC
-    /// only: a diagnostic of which layer a surrogate's accuracy matters in
-    /// (`docs/RESULTS.md`). `None` (the default): `model`.
+    /// only: a diagnostic of which layer a surrogate's accuracy matters in (JSON key
+    /// `planner_model`, e.g. `picopit trace SCENE --config '{"preset": "picopinn",
+    /// "planner_model": "4dof"}'`). `None` (the default): `model`.
     pub planner_model: Option<ModelKind>,
     /// Folder of the model files: `<models_dir>/<params>/{pinn,picopinn}.safetensors`.
     pub models_dir: PathBuf,
