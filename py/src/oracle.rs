@@ -41,6 +41,23 @@ fn oracle_settings<'py>(
     py.import("json")?.call_method1("loads", (text,))
 }
 
+/// Parses `scenario` (JSON text) and runs `f` on it with the oracle settings, the GIL
+/// released; a bad scenario, bad settings or a failed run is a `ScenarioError`.
+fn on_scenario<T: Send, E: Send + std::fmt::Display + From<CoreError>>(
+    py: Python<'_>,
+    scenario: &str,
+    settings_json: Option<&str>,
+    f: fn(&Scenario, &OracleSettings) -> Result<T, E>,
+) -> PyResult<T> {
+    let s = settings(settings_json)?;
+    let text = scenario.to_owned();
+    py.detach(move || {
+        let sc = Scenario::from_json_line(&text, 1)?;
+        f(&sc, &s)
+    })
+    .map_err(|e| ScenarioError::new_err(e.to_string()))
+}
+
 /// The ideal-PIT bound on one scenario (JSON text): could one rear-quarter shove of the
 /// settings' grid (`settings_json`, see `oracle_settings`) at a time the bullet could be
 /// there end in success by the benchmark's test? Returns `feasible` (bool), `shove` (the
@@ -54,14 +71,7 @@ fn ideal_pit<'py>(
     scenario: &str,
     settings_json: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let s = settings(settings_json)?;
-    let text = scenario.to_owned();
-    let r = py
-        .detach(move || {
-            let sc = Scenario::from_json_line(&text, 1)?;
-            core_ideal_pit(&sc, &s)
-        })
-        .map_err(|e| ScenarioError::new_err(e.to_string()))?;
+    let r = on_scenario(py, scenario, settings_json, core_ideal_pit)?;
     let d = PyDict::new(py);
     d.set_item("feasible", r.feasible.is_some())?;
     match r.feasible {
@@ -101,14 +111,7 @@ fn oracle_tiers<'py>(
     scenario: &str,
     settings_json: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let s = settings(settings_json)?;
-    let text = scenario.to_owned();
-    let r = py
-        .detach(move || {
-            let sc = Scenario::from_json_line(&text, 1)?;
-            core_tiers(&sc, &s)
-        })
-        .map_err(|e| ScenarioError::new_err(e.to_string()))?;
+    let r = on_scenario(py, scenario, settings_json, core_tiers)?;
     let d = PyDict::new(py);
     let tiers = PyDict::new(py);
     for (name, v) in TIERS.iter().zip(r.tiers) {

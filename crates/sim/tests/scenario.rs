@@ -5,17 +5,6 @@ mod common;
 use serde_json::json;
 use sim::scenario::{parse_jsonl, Scenario, ScenarioError};
 
-fn field_error(text: &str, line: usize) -> (usize, String, String) {
-    match Scenario::from_json_line(text, line) {
-        Err(ScenarioError::Field {
-            line,
-            field,
-            message,
-        }) => (line, field, message),
-        other => panic!("expected a field error, got {other:?}"),
-    }
-}
-
 #[test]
 fn a_scenario_round_trips() {
     for v in [common::curved(), common::straight()] {
@@ -46,33 +35,36 @@ fn a_file_with_a_bad_line_names_the_line_and_the_field() {
 fn missing_unknown_and_mistyped_fields_are_named() {
     let mut v = common::curved();
     v.as_object_mut().unwrap().remove("eps_psi");
-    let (line, field, msg) = field_error(&v.to_string(), 5);
+    let (line, field, msg) = common::field_error(&v.to_string(), 5);
     assert_eq!((line, field.as_str()), (5, "eps_psi"), "{msg}");
 
     let mut v = common::curved();
     v["road"].as_object_mut().unwrap().remove("lanes");
-    assert_eq!(field_error(&v.to_string(), 1).1, "road.lanes");
+    assert_eq!(common::field_error(&v.to_string(), 1).1, "road.lanes");
 
     let mut v = common::curved();
     v["target"]["spin"] = json!(1.0);
-    assert_eq!(field_error(&v.to_string(), 1).1, "target.spin");
+    assert_eq!(common::field_error(&v.to_string(), 1).1, "target.spin");
 
     let mut v = common::curved();
     v["obstacles"][0]["body"]["width"] = json!("wide");
-    let (_, field, msg) = field_error(&v.to_string(), 1);
+    let (_, field, msg) = common::field_error(&v.to_string(), 1);
     assert_eq!(field, "obstacles[0].body.width", "{msg}");
 
     let mut v = common::curved();
     v["obstacles"][0]["body"]["width"] = json!(-1.0);
-    assert_eq!(field_error(&v.to_string(), 1).1, "obstacles[0].body.width");
+    assert_eq!(
+        common::field_error(&v.to_string(), 1).1,
+        "obstacles[0].body.width"
+    );
 
     let mut v = common::curved();
     v["driver"]["kind"] = json!("swerve");
-    assert_eq!(field_error(&v.to_string(), 1).1, "driver.kind");
+    assert_eq!(common::field_error(&v.to_string(), 1).1, "driver.kind");
 
     let mut v = common::curved();
     v["category"] = json!("roundabout");
-    assert_eq!(field_error(&v.to_string(), 1).1, "category");
+    assert_eq!(common::field_error(&v.to_string(), 1).1, "category");
 }
 
 #[test]
@@ -106,7 +98,7 @@ fn ranges_and_consistency_are_checked() {
     for (field, edit) in cases {
         let mut v = common::curved();
         edit(&mut v);
-        let (_, got, msg) = field_error(&v.to_string(), 2);
+        let (_, got, msg) = common::field_error(&v.to_string(), 2);
         assert_eq!(got, field, "{msg}");
     }
 }

@@ -4,18 +4,7 @@
 mod common;
 
 use serde_json::json;
-use sim::scenario::{Scenario, ScenarioError};
-
-fn field_error(text: &str, line: usize) -> (usize, String, String) {
-    match Scenario::from_json_line(text, line) {
-        Err(ScenarioError::Field {
-            line,
-            field,
-            message,
-        }) => (line, field, message),
-        other => panic!("expected a field error, got {other:?}"),
-    }
-}
+use sim::scenario::Scenario;
 
 #[test]
 fn a_key_named_twice_is_refused_with_its_path() {
@@ -23,12 +12,12 @@ fn a_key_named_twice_is_refused_with_its_path() {
     assert!(Scenario::from_json_line(&good, 1).is_ok());
     // At the top level (serde_json would have run on the second μ).
     let twice = good.replacen('{', r#"{"mu": 0.2, "#, 1);
-    let (line, field, message) = field_error(&twice, 4);
+    let (line, field, message) = common::field_error(&twice, 4);
     assert_eq!((line, field.as_str()), (4, "mu"), "{message}");
     assert!(message.contains("twice"), "{message}");
     // Deeper down.
     let twice = good.replacen(r#""lanes":"#, r#""lanes": 2, "lanes":"#, 1);
-    let (_, field, _) = field_error(&twice, 1);
+    let (_, field, _) = common::field_error(&twice, 1);
     assert_eq!(field, "road.lanes");
 }
 
@@ -45,7 +34,7 @@ fn an_obstacle_on_a_vehicle_at_the_start_is_refused() {
             {"role": "roadside", "body": {"x": at.x + 0.5, "y": at.y, "heading": 0.3,
              "vx": 0.0, "vy": 0.0, "length": 0.4, "width": 0.4}},
         ]);
-        let (_, field, message) = field_error(&v.to_string(), 2);
+        let (_, field, message) = common::field_error(&v.to_string(), 2);
         assert_eq!(field, "obstacles[1].body", "{message}");
         assert_eq!(message, format!("overlaps the {who} at t = 0"));
     }

@@ -2,6 +2,19 @@
 #![allow(dead_code)]
 
 use serde_json::{json, Value};
+use sim::scenario::{Scenario, ScenarioError};
+
+/// The `(line, field, message)` of the field error `text` must give at `line`.
+pub fn field_error(text: &str, line: usize) -> (usize, String, String) {
+    match Scenario::from_json_line(text, line) {
+        Err(ScenarioError::Field {
+            line,
+            field,
+            message,
+        }) => (line, field, message),
+        other => panic!("expected a field error, got {other:?}"),
+    }
+}
 
 /// A curved full-size scenario: 2 lanes of 3.5 m, R = 200 m left, target in the right
 /// lane at 15 m/s keeping its lane, the bullet 8 m behind in the left lane at 18 m/s.
