@@ -139,9 +139,6 @@ pub struct PlannerSettings {
     /// reversed heading (the yaw goes on after the look-ahead; τ is its decay time).
     pub heading_tol: f64,
     pub yaw_decay: f64,
-    /// The free slide after the look-ahead (s): each candidate's prediction is rolled on
-    /// without force for this long, and its footprint must stay inside the road (0: off).
-    pub check_horizon: f64,
     /// Deceleration of the spun target for the post-PIT stopping point while its tyres slide
     /// sideways (fraction of μ g; rolling along its body it slows only by its rolling
     /// resistance and driveline, `Planner`'s stopping model).
@@ -190,7 +187,6 @@ impl Default for PlannerSettings {
             turn_in: 0.4,
             heading_tol: 0.6,
             yaw_decay: 0.4,
-            check_horizon: 0.0,
             stop_decel_fraction: 0.7,
             road_margin: 0.0,
             obstacle_clearance: 0.5,
@@ -279,7 +275,6 @@ impl PlannerSettings {
             ("contact_angle", self.contact_angle),
             ("overlap", self.overlap),
             ("push_speed", self.push_speed),
-            ("check_horizon", self.check_horizon),
             ("settle_time", self.settle_time),
             ("standoff", self.standoff),
             ("turn_in", self.turn_in),
@@ -298,13 +293,6 @@ impl PlannerSettings {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(name, format!("must be finite and >= 0 (got {v})")));
             }
-        }
-        // The free slide is rolled out step by step inside every candidate's evaluation.
-        if self.check_horizon > 30.0 {
-            return Err(invalid(
-                "check_horizon",
-                format!("must be at most 30 s (got {})", self.check_horizon),
-            ));
         }
         let steps = self.horizon / self.dt;
         if (steps - steps.round()).abs() > 1e-9 || !(4.0..=400.0).contains(&steps.round()) {
@@ -561,8 +549,6 @@ mod tests {
             ("[phases]\nlet_go_turn = -0.1", "phases.let_go_turn"),
             ("[planner]\ndt = 0.1", "planner.dt"),
             ("[mpc]\nhorizon = 1", "horizon"),
-            ("[planner]\ncheck_horizon = 1e9", "check_horizon"),
-            ("[planner]\ncheck_horizon = -1.0", "check_horizon"),
         ];
         for (text, field) in cases {
             let e = ControllerSettings::from_toml_str(text)

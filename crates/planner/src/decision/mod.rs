@@ -108,8 +108,6 @@ struct Outcome {
     road_margin: f64,
     clearance: f64,
     stop_margin: f64,
-    /// Least road margin of the free slide after the look-ahead (`check_horizon`).
-    slide_margin: f64,
 }
 
 /// How the upper layer judges a given push ([`Planner::judge`]): the plan's own terminal
@@ -124,8 +122,6 @@ pub struct Judgement {
     pub clearance: f64,
     /// Road margin of the predicted stopping point (m).
     pub stop_margin: f64,
-    /// Least road margin of the free slide after the look-ahead (`check_horizon`; +∞ off).
-    pub slide_margin: f64,
     /// Whether a candidate with this outcome would be feasible (in the terminal set, inside
     /// the road, clear of obstacles, each within `violation_tol`).
     pub feasible: bool,
@@ -358,7 +354,7 @@ impl Planner {
     ) {
         if self.acceptable(
             o.heading_error,
-            [o.road_margin, o.stop_margin, o.slide_margin],
+            [o.road_margin, o.stop_margin],
             o.clearance,
         ) {
             *feasible += 1;
@@ -386,10 +382,9 @@ impl Planner {
             .heading
     }
 
-    /// The feasibility test of a candidate: terminal heading within `heading_tol`, road,
-    /// stopping-point and free-slide margins and obstacle clearance within
-    /// `violation_tol`.
-    fn acceptable(&self, heading_error: f64, margins: [f64; 3], clearance: f64) -> bool {
+    /// The feasibility test of a candidate: terminal heading within `heading_tol`, road and
+    /// stopping-point margins and obstacle clearance within `violation_tol`.
+    fn acceptable(&self, heading_error: f64, margins: [f64; 2], clearance: f64) -> bool {
         let tol = self.settings.violation_tol;
         heading_error <= self.settings.heading_tol
             && margins.iter().all(|&m| m >= -tol)
@@ -434,16 +429,14 @@ impl Planner {
         let (_, _, road_margin, clearance, stop_margin) = self.merit(false);
         let heading_error =
             projected_heading_error(&self.xs[self.n], self.settings.yaw_decay, self.psi_rev);
-        let slide_margin = self.slide_margin(input.road);
         Ok(Judgement {
             heading_error,
             road_margin,
             clearance,
             stop_margin,
-            slide_margin,
             feasible: self.acceptable(
                 heading_error,
-                [road_margin, stop_margin, slide_margin],
+                [road_margin, stop_margin],
                 clearance,
             ),
         })
@@ -474,8 +467,7 @@ impl Planner {
             self.rollout(Some(input.road), &input.target, false, false);
             self.linearise_rows(input.road, input.obstacles);
             let (_, heading_error, road_margin, clearance, stop_margin) = self.merit(false);
-            // (The free slide is not asked of a push already done.)
-            if self.acceptable(heading_error, [road_margin, stop_margin, 0.0], clearance) {
+            if self.acceptable(heading_error, [road_margin, stop_margin], clearance) {
                 self.package.candidates = 0;
                 self.package.feasible_candidates = 0;
                 self.fill_package(Mode::Stabilise, None, None, lane, input);
@@ -596,9 +588,7 @@ impl Planner {
                     Infeasible::ObstacleClearance
                 }
                 Some(o)
-                    if o.road_margin < BINDING
-                        || o.stop_margin < BINDING
-                        || o.slide_margin < BINDING =>
+                    if o.road_margin < BINDING || o.stop_margin < BINDING =>
                 {
                     Infeasible::RoadBoundary
                 }
@@ -688,36 +678,6 @@ pub fn wrap(a: f64) -> f64 {
 mod tests {
     use super::*;
     use dynamics::target4dof::FourDofTarget;
-
-    /// The free slide after the look-ahead (`check_horizon`): a target rolling along the
-    /// road keeps its margin, one heading off at 0.3 rad crosses the edge within 4 s.
-    #[test]
-    fn free_slide_check_sees_the_edge() {
-        let params = ParamSet::builtin("full_size").unwrap();
-        let s = PlannerSettings {
-            check_horizon: 4.0,
-            ..PlannerSettings::default()
-        };
-        let model = Box::new(FourDofTarget::new(&params.target, 0.9, s.dt));
-        let mut p = Planner::new(&params, 0.9, model, s).unwrap();
-        let road = Road::straight(2000.0, 3, 3.5, 1.0);
-        let margin = |p: &mut Planner, psi: f64| {
-            let mut x0 = TargetState::zeros();
-            x0[idx::VX] = 15.0;
-            x0[idx::X] = 100.0;
-            x0[idx::PSI] = psi;
-            p.setup_candidate(Side::Left, p.n, 0.0);
-            p.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
-            p.rollout(None, &x0, false, false);
-            p.slide_margin(&road)
-        };
-        let along = margin(&mut p, 0.0);
-        let off = margin(&mut p, 0.3);
-        assert!(along > 1.0, "along the road: margin {along}");
-        assert!(off < -1.0, "heading off the road: margin {off}");
-        p.settings.check_horizon = 0.0;
-        assert_eq!(margin(&mut p, 0.3), f64::INFINITY, "off: no check");
-    }
 
     /// The chained sensitivities ∂x_k/∂F (with γ turning with ψ) against central
     /// differences of the nonlinear rollout.

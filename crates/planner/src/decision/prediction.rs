@@ -1,6 +1,5 @@
 //! A candidate's prediction: the target's rollout under the candidate's virtual push, its
-//! chained sensitivities to the forces, the footprint and the post-PIT stopping point, and
-//! the free slide after the look-ahead.
+//! chained sensitivities to the forces, the footprint and the post-PIT stopping point.
 
 use super::*;
 
@@ -221,27 +220,5 @@ impl Planner {
         let roll = t.rolling_resistance * GRAVITY + driveline;
         let sin_slip = x[idx::VY].abs() / speed;
         roll.min(slide) + (slide - roll).max(0.0) * sin_slip
-    }
-
-    /// The least road margin (beyond `road_margin`) of the target's footprint while it rolls
-    /// on without force from the end of the look-ahead for `check_horizon` seconds.
-    pub(super) fn slide_margin(&mut self, road: &Road) -> f64 {
-        let s = &self.settings;
-        let steps = (s.check_horizon / s.dt).round() as usize;
-        let mut x = self.xs[self.n];
-        let mut least = f64::INFINITY;
-        for _ in 0..steps {
-            let c = self.contact(self.n, Vec2::zeros(), x[idx::PSI]);
-            x = self.model.step(&x, &self.input_u, &c);
-            if !x.iter().all(|v| v.is_finite()) {
-                return f64::NEG_INFINITY;
-            }
-            let cg = Vec2::new(x[idx::X], x[idx::Y]);
-            least = least.min(edge_row(road, &self.footprint(&x), cg, s.road_margin).rhs);
-            if x[idx::VX].hypot(x[idx::VY]) < 0.5 * self.len_scale.sqrt() {
-                break;
-            }
-        }
-        least
     }
 }

@@ -159,7 +159,6 @@ impl Planner {
             road_margin: current.2,
             clearance: current.3,
             stop_margin: current.4,
-            slide_margin: self.slide_margin(input.road),
         })
     }
 
