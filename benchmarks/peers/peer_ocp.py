@@ -34,7 +34,7 @@ GRAVITY = 9.80665
 V_LOW = 0.5  # tyre.rs
 V_BRAKE = 0.5  # target4dof.rs
 V_STALL_BLEND = 0.25  # target4dof.rs
-AIR_DENSITY = 1.204  # plant.rs
+AIR_DENSITY = 1.204  # plant/mod.rs
 STABLE_DOWN_TO = 1.0  # bullet.rs
 FAR = 1.0e4  # mpc.rs: a right-hand side that makes a row inactive
 
