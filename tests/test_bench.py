@@ -230,7 +230,7 @@ def test_the_default_scene_set_is_a_fixed_stratified_subset():
 
 
 def test_the_contact_figure_bins_success_by_value_and_skips_missing_ones():
-    from picopit.bench import _binned_success
+    from picopit.bench_figures import _binned_success
 
     rows = [{"v": 0.5, "success": True}, {"v": 1.5, "success": False}, {"v": 1.7, "success": True},
             {"v": None, "success": True}, {"v": float("nan"), "success": True}, {"v": 9.0, "success": True}]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from picopit import cli, trials
+from picopit import cli, trials, trials_report
 
 REPO = Path(__file__).resolve().parents[1]
 RELEASE = REPO / "target" / "release"
@@ -79,7 +79,7 @@ def test_tables_format():
     runs = trials.runs_table(rows)
     assert "| R1 | seed 2 | unsafe rebound | 0.600 | 1.50 / 9.00 | 100 / 250 | 1.40 / 8.50 | 2 | 0 | "\
            "controller request at 1.25 s |" in runs
-    assert trials._f(None) == "—" and trials._f(float("nan")) == "—"
+    assert trials_report._f(None) == "—" and trials_report._f(float("nan")) == "—"
 
 
 def test_parse_cases():

@@ -136,7 +136,7 @@ def _cmd_trace(args: argparse.Namespace) -> int:
     if args.csv:
         print(f"trace: wrote {t.write_csv(Path(args.csv))}")
     if args.plot:
-        from .bench import plot_case
+        from .bench_figures import plot_case
 
         plot_case({"trajectory": t.trajectory}, scene, Path(args.plot), f"{scene['id']}: {args.config}")
         print(f"trace: wrote {args.plot}")
