@@ -189,6 +189,24 @@ def test_no_delay_compensation_reaches_the_controller_only(tmp_path):
     assert "--no-delay-compensation" in ctl and "--no-delay-compensation" not in veh
 
 
+def test_scenarios_without_half_scale_use_the_built_in_settings(tmp_path):
+    """--scenarios alone runs the controller on its built-in (full-size) settings: no
+    --controller-config on its command line; --controller-config still reaches it."""
+    bins = str(_fake_bins(tmp_path / "b"))
+    textbook = str(REPO / "data" / "textbook" / "scenarios.jsonl")
+    t = trials.Trial(case="sc-00000", kind="nominal", seed=0, noise="none", latency=0.0, record=False)
+    cfg = trials.build_config(cli.build_parser().parse_args(["trials", "--scenarios", textbook, "--bin-dir", bins]))
+    assert cfg.controller_config is None
+    _, ctl = trials.commands(cfg, t, tmp_path, "p")
+    assert "--controller-config" not in ctl
+    own = tmp_path / "ctl.toml"
+    own.write_text("[planner]\nwindow = 0.8\n")
+    cfg = trials.build_config(cli.build_parser().parse_args(
+        ["trials", "--scenarios", textbook, "--controller-config", str(own), "--bin-dir", bins]))
+    _, ctl = trials.commands(cfg, t, tmp_path, "p")
+    assert ctl[ctl.index("--controller-config") + 1] == str(own.resolve())
+
+
 def test_find_bin_dir_order(tmp_path):
     for name in ("pit-vehicle", "pit-controller"):
         f = tmp_path / name
@@ -241,3 +259,22 @@ def test_end_to_end_r4(tmp_path, capsys):
         rows = list(csv.DictReader(fh))
     assert [(r["case"], r["kind"], r["seed"]) for r in rows] == [("R4", "nominal", "0"), ("R4", "repeat", "1")]
     assert all(r["noise"] for r in rows) and rows[1]["noise"] == "paper"
+
+
+@pytest.mark.skipif(not (RELEASE / "pit-vehicle").exists() or not (RELEASE / "pit-controller").exists(),
+                    reason="target/release/pit-vehicle or pit-controller not built")
+def test_full_size_scene_with_a_relative_out_from_elsewhere(tmp_path, capsys, monkeypatch):
+    """A textbook scene on the built-in settings, started outside the source tree with a
+    relative --out: the processes (run from the tree) still write into it, and the noise-free
+    run turns the target round (this scene succeeds in the benchmark too)."""
+    monkeypatch.chdir(tmp_path)
+    rc = cli.main(["trials", "--scenarios", str(REPO / "data" / "textbook" / "scenarios.jsonl"),
+                   "--cases", "sc-00000", "--repeats", "0", "--out", "rel", "--bin-dir", str(RELEASE),
+                   "--no-progress", "--no-figures"])
+    capsys.readouterr()
+    assert rc == 0
+    doc = json.loads((tmp_path / "rel" / "trials.json").read_text())
+    case = doc["cases"]["sc-00000"]
+    assert case["success"] is True and case["error"] is None, case["outcome"]
+    assert case["heading_error_rad"] < 0.349
+    assert (tmp_path / "rel" / "sc-00000" / "nominal" / "controller.json").is_file()

@@ -236,7 +236,7 @@ def _trials_parser(sub) -> None:
     p.add_argument("--half-scale", action="store_true",
                    help="the half-scale trials: data/trials/half_scale.jsonl with configs/controller_half_scale.toml")
     p.add_argument("--scenarios", metavar="JSONL", help="trial scenarios (overrides --half-scale's)")
-    p.add_argument("--controller-config", metavar="TOML", help="controller settings (overrides --half-scale's)")
+    p.add_argument("--controller-config", metavar="TOML", help="controller settings (overrides --half-scale's; without --half-scale: the built-in full-size settings)")
     p.add_argument("--cases", metavar="LIST", help="comma-separated case ids (default: all in the file)")
     p.add_argument("--repeats", type=int, default=5, metavar="K", help="noisy repeats per case, seeds 1..K (default 5)")
     p.add_argument("--noise", choices=("none", "paper"), default="paper", help="sensing noise of the repeats (default paper)")

@@ -77,9 +77,9 @@ def build_config(args: Any) -> TrialsConfig:
         return root / default
 
     scenarios = resolve(args.scenarios, HALF_SCALE_SCENARIOS, "--scenarios")
-    ctl_cfg = resolve(args.controller_config, HALF_SCALE_CONTROLLER, "--controller-config")
-    if not args.half_scale and not args.controller_config:
-        raise TrialsError("--scenarios without --half-scale: give --controller-config too")
+    # Without --half-scale the controller keeps its built-in (full-size) settings.
+    ctl_cfg = (resolve(args.controller_config, HALF_SCALE_CONTROLLER, "--controller-config")
+               if args.half_scale or args.controller_config else None)
     known = load_cases(scenarios)
     cases = parse_cases(args.cases, list(known))
     bin_dir = find_bin_dir(args.bin_dir)
@@ -95,13 +95,14 @@ def build_config(args: Any) -> TrialsConfig:
 def run(args: Any, command: str) -> Tuple[Dict[str, Any], List[Dict[str, Any]], Dict[str, Path]]:
     """``picopit trials``: run, summarise, write; returns the summary, the rows and the paths."""
     cfg = build_config(args)
-    out = check_dir(Path(args.out) if args.out else default_out(), "--out")
+    # Absolute: the processes run from the source tree, not from here.
+    out = check_dir((Path(args.out) if args.out else default_out()).resolve(), "--out")
     if args.json:
         check_file(args.json, "--json")
     info: Dict[str, Any] = {
         "command": command, "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "git_commit": git_commit(), "machine": machine(), "scenarios": str(cfg.scenarios),
-        "controller_config": str(cfg.controller_config), "bin_dir": str(cfg.bin_dir), "cases": cfg.cases,
+        "controller_config": str(cfg.controller_config or "built-in"), "bin_dir": str(cfg.bin_dir), "cases": cfg.cases,
         "repeats": cfg.repeats, "noise": cfg.noise, "latency": cfg.latency,
         "clock": "wall" if cfg.realtime else "simulated", "jobs": cfg.jobs, "model": cfg.model,
         "delay_compensation": cfg.delay_compensation,

@@ -117,7 +117,7 @@ def parse_cases(text: Optional[str], known: Sequence[str]) -> List[str]:
 @dataclass
 class TrialsConfig:
     scenarios: Path
-    controller_config: Path
+    controller_config: Optional[Path]  # None: the controller's built-in (full-size) settings
     bin_dir: Path
     cases: List[str]
     repeats: int = 5
@@ -143,7 +143,7 @@ class TrialsConfig:
             raise TrialsError(f"--noise = {self.noise!r}: none or paper")
         if self.timeout is not None and not self.timeout > 0:
             raise TrialsError(f"--timeout = {self.timeout}: must be > 0 (s)")
-        if not self.controller_config.is_file():
+        if self.controller_config is not None and not self.controller_config.is_file():
             raise TrialsError(f"--controller-config: {self.controller_config} does not exist")
         return self
 

@@ -75,7 +75,9 @@ def commands(cfg: TrialsConfig, t: Trial, run_dir: Path, prefix: str) -> Tuple[L
         veh += ["--latency", repr(float(t.latency))]
     ctl = [str(cfg.bin_dir / CONTROLLER_BIN), "--scenario", str(cfg.scenarios), "--id", t.case,
            "--clock", "wall" if cfg.realtime else "vehicle", "--prefix", prefix,
-           "--controller-config", str(cfg.controller_config), "--summary", str(run_dir / "controller.json")]
+           "--summary", str(run_dir / "controller.json")]
+    if cfg.controller_config is not None:
+        ctl += ["--controller-config", str(cfg.controller_config)]
     if cfg.model:
         ctl += ["--model", cfg.model]
     if not cfg.delay_compensation:
