@@ -352,11 +352,7 @@ impl Planner {
         best_any: &mut Option<Outcome>,
         feasible: &mut u32,
     ) {
-        if self.acceptable(
-            o.heading_error,
-            [o.road_margin, o.stop_margin],
-            o.clearance,
-        ) {
+        if self.acceptable(o.heading_error, [o.road_margin, o.stop_margin], o.clearance) {
             *feasible += 1;
             if best.is_none_or(|b| o.objective < b.objective) {
                 *best = Some(o);
@@ -434,11 +430,7 @@ impl Planner {
             road_margin,
             clearance,
             stop_margin,
-            feasible: self.acceptable(
-                heading_error,
-                [road_margin, stop_margin],
-                clearance,
-            ),
+            feasible: self.acceptable(heading_error, [road_margin, stop_margin], clearance),
         })
     }
 
@@ -587,9 +579,7 @@ impl Planner {
                 Some(o) if o.clearance < self.settings.obstacle_clearance + BINDING => {
                     Infeasible::ObstacleClearance
                 }
-                Some(o)
-                    if o.road_margin < BINDING || o.stop_margin < BINDING =>
-                {
+                Some(o) if o.road_margin < BINDING || o.stop_margin < BINDING => {
                     Infeasible::RoadBoundary
                 }
                 Some(_) => Infeasible::TerminalSetUnreachable,
