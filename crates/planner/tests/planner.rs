@@ -572,3 +572,29 @@ fn a_stand_off_line_blocked_ahead_holds_the_chase_back() {
     fill_reference(&free, &s, &mut r, &xt, &beside, timing);
     assert!(r.stages.iter().all(|st| st.rel_pos.y > 1.0));
 }
+
+/// On a curve the bullet works on the inside (its push turns the target's nose into the
+/// curve, and the spin's path bends with the road), from whichever side it starts; on a
+/// straight it keeps its own side. The curve begins 20 m ahead of the target, within the
+/// look-ahead of the side choice.
+#[test]
+fn on_a_curve_the_push_comes_from_the_inside() {
+    let side_for = |radius: Option<f64>, ry: f64| {
+        let road = match radius {
+            Some(r) => Road::curved(120.0, r, 400.0, 30.0, 3, 3.5, 1.0),
+            None => road(),
+        };
+        let (xt, xb) = states(&road, -8.0, ry, 18.0, 20.0);
+        let mut p = planner(PlannerSettings::default());
+        p.plan(&input(&road, &[], xt, xb)).unwrap().side
+    };
+    use mpc::reference::Side;
+    // A left curve: inside is the target's left, whether the bullet starts right or left.
+    assert_eq!(side_for(Some(150.0), -3.5), Side::Left);
+    assert_eq!(side_for(Some(150.0), 3.5), Side::Left);
+    // A right curve: inside is the right.
+    assert_eq!(side_for(Some(-150.0), 3.5), Side::Right);
+    // A straight road: the bullet's own side.
+    assert_eq!(side_for(None, -3.5), Side::Right);
+    assert_eq!(side_for(None, 3.5), Side::Left);
+}

@@ -172,6 +172,9 @@ pub struct Planner {
     /// The current candidate's contact point along the target (body x, m).
     contact_x: f64,
     psi_rev: f64,
+    /// The inside of the curve the target is on or coming to, if the bullet has room
+    /// there ([`Planner::inside_side`]).
+    inside: Option<Side>,
     input_u: TargetInput,
     /// The target driver of the rollout: `None` holds `input_u` (the push's rollouts); the
     /// race test rolls the free motion out under a lane keeper too.
@@ -289,6 +292,7 @@ impl Planner {
             contact_point: Vec2::zeros(),
             contact_x: rear_quarter_x(params),
             psi_rev: 0.0,
+            inside: None,
             input_u: TargetInput::zeros(),
             lane_keeper: None,
             time: 0.0,
@@ -354,7 +358,9 @@ impl Planner {
     ) {
         if self.acceptable(o.heading_error, [o.road_margin, o.stop_margin], o.clearance) {
             *feasible += 1;
-            if best.is_none_or(|b| o.objective < b.objective) {
+            // On a curve a feasible push from the inside beats any from the outside.
+            let inside = |c: &Outcome| self.inside == Some(c.side);
+            if best.is_none_or(|b| (inside(&o), -o.objective) > (inside(&b), -b.objective)) {
                 *best = Some(o);
                 self.best.copy_from_slice(&self.forces);
             }
@@ -457,6 +463,7 @@ impl Planner {
             self.setup_candidate(side, self.n, lane);
             self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
             self.rollout(Some(input.road), &input.target, false, false);
+            self.inside = self.inside_side(input);
             self.linearise_rows(input.road, input.obstacles);
             let (_, heading_error, road_margin, clearance, stop_margin) = self.merit(false);
             if self.acceptable(heading_error, [road_margin, stop_margin], clearance) {
@@ -594,8 +601,9 @@ impl Planner {
             }
             None => {
                 // Chase (nothing reachable) or every candidate failed numerically: the
-                // package carries the free (no-force) prediction.
-                let side = self.bullet_side(input);
+                // package carries the free (no-force) prediction. On a curve the bullet
+                // chases on the inside.
+                let side = self.inside.unwrap_or_else(|| self.bullet_side(input));
                 self.setup_candidate(side, self.n, lane);
                 self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
                 self.fill_package(mode, infeasible, None, lane, input);

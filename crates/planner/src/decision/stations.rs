@@ -5,6 +5,13 @@
 
 use super::*;
 
+/// Radius (m, full size) below which the road counts as a curve for the side choice
+/// ([`Planner::inside_side`]).
+const CURVE_RADIUS: f64 = 1000.0;
+
+/// How far ahead the side choice looks for a curve (s at the target's speed).
+const CURVE_LOOK: f64 = 4.0;
+
 impl Planner {
     /// The bullet's contact pose on `side` (target frame) at the current candidate's contact
     /// point.
@@ -156,6 +163,33 @@ impl Planner {
             s.approach_speed,
             BRAKE_MARGIN,
         );
+    }
+
+    /// On a curve, the side of the target towards the curve's centre, where the bullet
+    /// pushes from: its push turns the target's nose into the curve, so that its path
+    /// bends with the road while it spins (pushed from the outside, the nose turns out and
+    /// the spin carries it over the outer edge). The curve is the sharpest stretch of road
+    /// the target reaches within [`CURVE_LOOK`] at its speed; `None` on a straight (radius
+    /// beyond [`CURVE_RADIUS`]) or when the bullet has no room on that side.
+    pub(super) fn inside_side(&self, input: &PlannerInput<'_>) -> Option<Side> {
+        let x = &input.target;
+        let f = input.road.project(Vec2::new(x[idx::X], x[idx::Y]));
+        let reach = x[idx::VX].hypot(x[idx::VY]) * CURVE_LOOK;
+        let step = 5.0 * self.len_scale;
+        let mut kappa = f.curvature;
+        let mut ds = step;
+        while ds <= reach {
+            let k = input.road.pose_at(f.s + ds).curvature;
+            if k.abs() > kappa.abs() {
+                kappa = k;
+            }
+            ds += step;
+        }
+        if kappa.abs() * CURVE_RADIUS * self.len_scale < 1.0 {
+            return None;
+        }
+        let side = if kappa > 0.0 { Side::Left } else { Side::Right };
+        self.side_open(side, input).then_some(side)
     }
 
     /// Whether the bullet can line up on `side` inside the road (with the road margin).
