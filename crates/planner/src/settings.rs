@@ -485,7 +485,24 @@ impl Default for ControllerSettings {
     }
 }
 
+/// The half-scale platform's controller settings (`configs/controller_half_scale.toml`,
+/// built in): what [`ControllerSettings::builtin`] gives for `half_scale`.
+pub const HALF_SCALE_TOML: &str = include_str!("../../../configs/controller_half_scale.toml");
+
 impl ControllerSettings {
+    /// The built-in settings of a parameter set: `full_size` (the defaults) or `half_scale`
+    /// ([`HALF_SCALE_TOML`]); `None` for any other name.
+    #[must_use]
+    pub fn builtin(param_set: &str) -> Option<Self> {
+        match param_set {
+            "full_size" => Some(Self::default()),
+            "half_scale" => {
+                Some(Self::from_toml_str(HALF_SCALE_TOML).expect("built-in half-scale settings"))
+            }
+            _ => None,
+        }
+    }
+
     /// Parse and validate TOML (missing fields take their defaults).
     ///
     /// # Errors

@@ -173,7 +173,12 @@ pub struct EpisodeConfig {
     pub models_dir: PathBuf,
     /// A model file to use instead (for every parameter set).
     pub model_path: Option<PathBuf>,
+    /// The controller's settings on full-size scenes.
     pub controller: ControllerSettings,
+    /// The controller's settings on half-scale scenes (default: the built-in
+    /// `configs/controller_half_scale.toml`, tuned for the 100 kg target of the paper's
+    /// platform; the full-size settings push it with forces meant for a 1093 kg car).
+    pub controller_half_scale: ControllerSettings,
     pub uncertainty: Uncertainty,
     pub clock: ClockKind,
     /// Seconds per reading of the simulated clock.
@@ -194,6 +199,7 @@ impl Default for EpisodeConfig {
             models_dir: PathBuf::from("models"),
             model_path: None,
             controller: ControllerSettings::default(),
+            controller_half_scale: half_scale_controller(),
             uncertainty: Uncertainty::default(),
             clock: ClockKind::Wall,
             clock_tick: 1.0e-5,
@@ -234,6 +240,7 @@ impl EpisodeConfig {
             ..Self::default()
         };
         c.controller.upper_layer = upper;
+        c.controller_half_scale.upper_layer = upper;
         Ok(c)
     }
 
@@ -294,8 +301,24 @@ impl EpisodeConfig {
         self.uncertainty.validate()?;
         self.controller
             .validate()
-            .map_err(|e| config_err("controller", e.to_string()))
+            .map_err(|e| config_err("controller", e.to_string()))?;
+        self.controller_half_scale
+            .validate()
+            .map_err(|e| config_err("controller_half_scale", e.to_string()))
     }
+
+    /// The controller settings for a scene of parameter set `params`.
+    #[must_use]
+    pub fn controller_for(&self, params: ParamSetName) -> &ControllerSettings {
+        match params {
+            ParamSetName::FullSize => &self.controller,
+            ParamSetName::HalfScale => &self.controller_half_scale,
+        }
+    }
+}
+
+fn half_scale_controller() -> ControllerSettings {
+    ControllerSettings::builtin(ParamSetName::HalfScale.name()).expect("a built-in parameter set")
 }
 
 /// Merge `over` into `base`: objects key by key (recursively), anything else replaced.

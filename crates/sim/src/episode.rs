@@ -395,7 +395,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
     let params = sc.params.load()?;
     let road = sc.build_road()?;
     let obstacles = sc.obstacles();
-    let mut settings = config.controller.clone();
+    let mut settings = config.controller_for(sc.params).clone();
     if config.clock == ClockKind::Simulated {
         // The solvers' own wall-clock limits would make the episode machine-dependent.
         settings.mpc.qp.time_limit = 1.0e6;

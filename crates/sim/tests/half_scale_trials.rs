@@ -18,11 +18,9 @@ fn trials() -> Vec<Scenario> {
     sim::load_jsonl(root().join("data/trials/half_scale.jsonl")).expect("the trial file loads")
 }
 
+/// The preset as the benchmark runs it: its half-scale settings are the built-in file's.
 fn config() -> EpisodeConfig {
-    let text = std::fs::read_to_string(root().join("configs/controller_half_scale.toml"))
-        .expect("the settings file exists");
     let mut c = EpisodeConfig::preset("picopinn").unwrap();
-    c.controller = planner::ControllerSettings::from_toml_str(&text).expect("valid settings");
     c.models_dir = root().join("models");
     c.clock = ClockKind::Simulated;
     c
@@ -33,6 +31,35 @@ fn case(id: &str) -> Scenario {
         .into_iter()
         .find(|s| s.id == id)
         .unwrap_or_else(|| panic!("case {id} in the trial file"))
+}
+
+#[test]
+fn half_scale_scenes_run_with_the_half_scale_settings_file() {
+    let text = std::fs::read_to_string(root().join("configs/controller_half_scale.toml"))
+        .expect("the settings file exists");
+    let file = planner::ControllerSettings::from_toml_str(&text).expect("valid settings");
+    let c = config();
+    assert_eq!(c.controller_for(sim::scenario::ParamSetName::HalfScale), &file);
+    assert_eq!(
+        c.controller_for(sim::scenario::ParamSetName::FullSize),
+        &planner::ControllerSettings::default()
+    );
+    assert_ne!(file, planner::ControllerSettings::default());
+    // The ablation switches the upper layer off for both.
+    let no_upper = EpisodeConfig::preset("picopinn_no_upper").unwrap();
+    assert!(!no_upper.controller_half_scale.upper_layer && !no_upper.controller.upper_layer);
+    // A JSON override reaches the half-scale settings by their own key, and is validated.
+    let j = EpisodeConfig::from_json(
+        r#"{"preset": "picopinn", "controller_half_scale": {"planner": {"heading_tol": 0.2}}}"#,
+    )
+    .unwrap();
+    assert!((j.controller_half_scale.planner.heading_tol - 0.2).abs() < 1e-12);
+    assert_eq!(j.controller_half_scale.mpc, file.mpc);
+    let bad = EpisodeConfig::from_json(
+        r#"{"preset": "picopinn", "controller_half_scale": {"planner": {"heading_tol": -1.0}}}"#,
+    )
+    .unwrap_err();
+    assert!(bad.to_string().contains("controller_half_scale"), "{bad}");
 }
 
 #[test]

@@ -122,7 +122,8 @@ class Trace:
 
 def config_text(config: str, clock: str = "simulated", controller_toml: Optional[Path] = None) -> str:
     """The configuration the core parses: a preset name or a JSON object, on ``clock`` unless
-    it names one, with the controller settings of a TOML file over its own."""
+    it names one, with the controller settings of a TOML file in place of its own (for
+    full-size and half-scale scenes alike)."""
     text = config.strip()
     if text.startswith("{"):
         try:
@@ -138,7 +139,8 @@ def config_text(config: str, clock: str = "simulated", controller_toml: Optional
         from . import _toml  # tomllib, or tomli before Python 3.11
 
         try:
-            doc["controller"] = _toml.loads(Path(controller_toml).read_text())
+            # The scene's settings whatever its parameter set (full size or half scale).
+            doc["controller"] = doc["controller_half_scale"] = _toml.loads(Path(controller_toml).read_text())
         except OSError as e:
             raise TraceError(f"--controller-config {controller_toml}: {e.strerror or e}") from None
         except ValueError as e:
