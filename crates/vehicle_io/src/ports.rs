@@ -25,7 +25,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use std::fmt::Debug;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Once;
 use std::time::Duration;
 
 /// The iceoryx2 service flavour: inter-process, shared memory.
@@ -117,8 +118,8 @@ fn service_err(service: &str, e: impl Debug) -> PortError {
     }
 }
 
-/// A node for this process (signals: SIGINT/SIGTERM are caught and reported by
-/// [`Node::wait`], see [`termination_requested`]).
+/// A node for this process (signals: SIGINT/SIGTERM are caught, see
+/// [`termination_requested`]).
 ///
 /// # Errors
 /// [`PortError::Node`] when iceoryx2 cannot create it.
@@ -129,26 +130,74 @@ pub fn node(name: &str) -> Result<Node<Svc>, PortError> {
     let name: NodeName = name
         .try_into()
         .map_err(|e| PortError::Node(format!("node name {name:?}: {e:?}")))?;
-    NodeBuilder::new()
+    let node = NodeBuilder::new()
         .name(&name)
         .create::<Svc>()
-        .map_err(|e| PortError::Node(format!("{e:?}")))
+        .map_err(|e| PortError::Node(format!("{e:?}")))?;
+    catch_termination(&node);
+    Ok(node)
 }
 
-/// Set once SIGINT or SIGTERM has been seen (iceoryx2 reports each signal once).
+/// Set once SIGINT or SIGTERM has arrived, by [`on_termination`] (and by
+/// [`termination_requested`] when iceoryx2 reports one).
 static TERMINATION: AtomicBool = AtomicBool::new(false);
+/// The SIGINT and SIGTERM handlers [`on_termination`] replaced and calls on (iceoryx2's, as
+/// addresses; 0: none).
+static PREVIOUS_HANDLER: [AtomicUsize; 2] = [AtomicUsize::new(0), AtomicUsize::new(0)];
+
+/// This process's SIGINT/SIGTERM handler: it sets [`TERMINATION`], then calls the handler it
+/// replaced. iceoryx2 keeps only the last signal that arrived, in one slot, so a SIGCONT that
+/// follows a SIGTERM (as `systemctl stop` sends them, or a pause's end just before a stop)
+/// erased the request there; the flag keeps it. Async-signal-safe: atomics only.
+extern "C" fn on_termination(signal: libc::c_int) {
+    TERMINATION.store(true, Ordering::SeqCst);
+    let previous = PREVIOUS_HANDLER[usize::from(signal == libc::SIGTERM)].load(Ordering::SeqCst);
+    if previous != 0 {
+        // SAFETY: a one-argument handler taken from `sigaction` (not SA_SIGINFO, not
+        // SIG_DFL or SIG_IGN) by `catch_termination`.
+        let handler: extern "C" fn(libc::c_int) = unsafe { std::mem::transmute(previous) };
+        handler(signal);
+    }
+}
+
+/// Install [`on_termination`] for SIGINT and SIGTERM, once per process, on top of
+/// iceoryx2's handlers (which it installs on first use: `node.wait` makes sure of that
+/// first). No `SA_RESTART`: the signal still interrupts a wait.
+fn catch_termination(node: &Node<Svc>) {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        if node.wait(Duration::ZERO).is_err() {
+            TERMINATION.store(true, Ordering::SeqCst);
+        }
+        for (slot, signal) in PREVIOUS_HANDLER.iter().zip([libc::SIGINT, libc::SIGTERM]) {
+            // SAFETY: plain `sigaction` calls with zero-initialised (valid) structs.
+            unsafe {
+                let mut new: libc::sigaction = std::mem::zeroed();
+                new.sa_sigaction = on_termination as extern "C" fn(libc::c_int) as usize;
+                libc::sigemptyset(&raw mut new.sa_mask);
+                let mut old: libc::sigaction = std::mem::zeroed();
+                if libc::sigaction(signal, &raw const new, &raw mut old) == 0
+                    && old.sa_sigaction != libc::SIG_DFL
+                    && old.sa_sigaction != libc::SIG_IGN
+                    && old.sa_flags & libc::SA_SIGINFO == 0
+                {
+                    slot.store(old.sa_sigaction, Ordering::SeqCst);
+                }
+            }
+        }
+    });
+}
 
 /// Whether SIGINT or SIGTERM has arrived (checked without blocking). Once true, it stays
-/// true for the life of the process: iceoryx2's signal handler reports a signal to the first
-/// caller only, so a loop that checks in two places would otherwise miss it in the second.
+/// true for the life of the process, whatever signal came after it.
 #[must_use]
 pub fn termination_requested(node: &Node<Svc>) -> bool {
-    if TERMINATION.load(Ordering::Relaxed) {
+    if TERMINATION.load(Ordering::SeqCst) {
         return true;
     }
     let requested = node.wait(Duration::ZERO).is_err();
     if requested {
-        TERMINATION.store(true, Ordering::Relaxed);
+        TERMINATION.store(true, Ordering::SeqCst);
     }
     requested
 }
