@@ -12,8 +12,9 @@
 //!    delay): the newest states are predicted forward by their age at the command's time
 //!    (sensing latency + transport) plus the configured actuation delay, at most
 //!    `max_compensation`: the bullet with its bicycle model under the command in force when
-//!    it was measured, the target with the 4-DOF model under its driver's input; contact
-//!    is not predicted (an approximation while the cars touch). Steps of 5 ms.
+//!    it was measured, the target with the 4-DOF model under its driver's input, and the
+//!    contact between the two footprints by the plant's compliant law (the parameter set's
+//!    `[contact]`). Steps of 1 ms, the plant's, which the contact's stiffness needs.
 //! 3. **Control.** [`PitController::step`] at the predicted time (planner every replanning
 //!    period, MPC every step).
 //! 4. **Deadline.** A cycle longer than `deadline` (wall time) replaces its command by the
@@ -27,15 +28,19 @@
 use crate::config::{secs_to_ns, ControllerIoSettings};
 use crate::msg::{event, fault, ActuatorCommand, CommandMode, ControllerStatus, StateEstimate};
 use dynamics::bullet::{brake_along_road, BulletInput, BulletModel, BulletState};
+use dynamics::contact::{obb_contact, ContactLaw};
+use dynamics::geometry::{rotate, Obb, Pose2, Vec2};
 use dynamics::params::ParamSet;
 use dynamics::road::{Obstacle, Road};
+use dynamics::target::idx;
 use dynamics::target4dof::FourDofTarget;
 use dynamics::{ContactInput, TargetInput, TargetModel, TargetState};
 use mpc::{Clock, MonotonicClock, MpcStatus};
 use planner::{AbortReason, ControllerInput, Phase, PitController};
 
-/// Prediction step of the delay compensation (s).
-const PREDICT_DT: f64 = 0.005;
+/// Prediction step of the delay compensation (s): the plant's, which the contact's
+/// stiffness needs (`Plant::new` refuses contacts with ω·dt > 0.5 at this step).
+const PREDICT_DT: f64 = 0.001;
 
 /// What one cycle sees.
 #[derive(Debug, Clone, Copy)]
@@ -71,6 +76,7 @@ pub struct ControlLoop {
     obstacles: Vec<Obstacle>,
     bullet_model: BulletModel,
     target_model: FourDofTarget,
+    contact_law: ContactLaw,
     clock: Box<dyn Clock + Send>,
     seq: u64,
     counters: Counters,
@@ -118,6 +124,7 @@ impl ControlLoop {
             obstacles,
             bullet_model: BulletModel::new(&params.bullet, mu, PREDICT_DT),
             target_model: FourDofTarget::new(&params.target, mu, PREDICT_DT),
+            contact_law: ContactLaw::from_params(&params.contact),
             clock: Box::new(MonotonicClock::new()),
             seq: 0,
             counters: Counters::default(),
@@ -160,22 +167,77 @@ impl ControlLoop {
     }
 
     /// The delay compensation's prediction: the measured states of `s` carried forward by
-    /// `dt` seconds in steps of 5 ms, the bullet with its bicycle model under the command in
+    /// `dt` seconds in steps of 1 ms, the bullet with its bicycle model under the command in
     /// force when it was measured (`bullet_applied`), the target with the 4-DOF model under
-    /// its driver's input (`target_input`), without contact. `tests/predict.rs` sets it
-    /// against the plant.
+    /// its driver's input (`target_input`), and where their footprints overlap the contact
+    /// force of the plant's law between them (from the predicted states, not the measured
+    /// force: a car has no force sensor). `tests/predict.rs` sets it against the plant.
     pub fn predict(&mut self, s: &StateEstimate, dt: f64) -> (TargetState, BulletState) {
         let mut xt = TargetState::from_column_slice(&s.target);
         let mut xb = BulletState::from_column_slice(&s.bullet);
         let n = (dt / PREDICT_DT).round() as usize;
         let ub = BulletInput::new(s.bullet_applied[0], s.bullet_applied[1]);
         let ut = TargetInput::new(s.target_input[0], s.target_input[1]);
-        let none = ContactInput::none();
         for _ in 0..n {
-            xb = self.bullet_model.step(&xb, &ub, &none);
-            xt = self.target_model.step(&xt, &ut, &none);
+            let (ct, cb) = self.predicted_contact(&xt, &xb);
+            xb = self.bullet_model.step(&xb, &ub, &cb);
+            xt = self.target_model.step(&xt, &ut, &ct);
         }
         (xt, xb)
+    }
+
+    /// The contact of the predicted states as each vehicle's model takes it (the same force
+    /// and normal, the point in each body frame; none apart).
+    fn predicted_contact(
+        &self,
+        xt: &TargetState,
+        xb: &BulletState,
+    ) -> (ContactInput, ContactInput) {
+        let (pt, pb) = (&self.params.target, &self.params.bullet);
+        let (t_pos, b_pos) = (Vec2::new(xt[idx::X], xt[idx::Y]), Vec2::new(xb[0], xb[1]));
+        let (t_psi, b_psi) = (xt[idx::PSI], xb[2]);
+        let ft = Obb::vehicle_footprint(
+            &Pose2::new(t_pos.x, t_pos.y, t_psi),
+            pt.length,
+            pt.width,
+            pt.cg_to_front,
+        );
+        let fb = Obb::vehicle_footprint(
+            &Pose2::new(b_pos.x, b_pos.y, b_psi),
+            pb.length,
+            pb.width,
+            pb.cg_to_front,
+        );
+        // The bullet is body A, the target B: the normal points into the target.
+        let Some(geom) = obb_contact(&fb, &ft) else {
+            return (ContactInput::none(), ContactInput::none());
+        };
+        let point_velocity = |pos: Vec2, psi: f64, v: Vec2, r: f64| {
+            let arm = geom.point - pos;
+            rotate(psi, v) + Vec2::new(-r * arm.y, r * arm.x)
+        };
+        let v_t = point_velocity(
+            t_pos,
+            t_psi,
+            Vec2::new(xt[idx::VX], xt[idx::VY]),
+            xt[idx::R],
+        );
+        let v_b = point_velocity(b_pos, b_psi, Vec2::new(xb[3], xb[4]), xb[5]);
+        let fc = self.contact_law.force(
+            &geom,
+            v_t - v_b,
+            [
+                (1.0 / pb.mass, 1.0 / pb.iz, geom.point - b_pos),
+                (1.0 / pt.mass, 1.0 / pt.iz, geom.point - t_pos),
+            ],
+        );
+        let gamma = geom.gamma();
+        let at = |pos: Vec2, psi: f64| ContactInput {
+            fc,
+            gamma,
+            point_in_body: rotate(-psi, geom.point - pos),
+        };
+        (at(t_pos, t_psi), at(b_pos, b_psi))
     }
 
     fn fallback(&self, s: &StateEstimate) -> BulletInput {
