@@ -39,7 +39,10 @@ fn half_scale_scenes_run_with_the_half_scale_settings_file() {
         .expect("the settings file exists");
     let file = planner::ControllerSettings::from_toml_str(&text).expect("valid settings");
     let c = config();
-    assert_eq!(c.controller_for(sim::scenario::ParamSetName::HalfScale), &file);
+    assert_eq!(
+        c.controller_for(sim::scenario::ParamSetName::HalfScale),
+        &file
+    );
     assert_eq!(
         c.controller_for(sim::scenario::ParamSetName::FullSize),
         &planner::ControllerSettings::default()

@@ -18,6 +18,9 @@ fn a_sigterm_followed_by_a_sigcont_still_ends_the_process() {
         assert_eq!(libc::raise(libc::SIGTERM), 0);
         assert_eq!(libc::raise(libc::SIGCONT), 0);
     }
-    assert!(termination_requested(&n), "the SIGTERM was lost to the SIGCONT after it");
+    assert!(
+        termination_requested(&n),
+        "the SIGTERM was lost to the SIGCONT after it"
+    );
     assert!(termination_requested(&n), "and it stays seen");
 }
