@@ -3,6 +3,7 @@
 //! models, they must land where the plant (the truth) has moved on to, far nearer than the
 //! stale measurement itself.
 
+use dynamics::params::ParamSet;
 use dynamics::plant::{Plant, PlantConfig, VehicleInit};
 use dynamics::TargetModel;
 use vehicle_io::config::ControllerIoSettings;
@@ -16,7 +17,9 @@ struct Errors {
     stale: [[f64; 3]; 2],
 }
 
-fn errors(bullet_cmd: [f64; 2], target_cmd: [f64; 2], latency: f64) -> Errors {
+/// A control loop on the built-in full-size settings and a plant, for textbook scene
+/// sc-00000's parameter set, μ and road.
+fn loop_and_plant() -> (ControlLoop, Plant, ParamSet) {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let sc =
         vehicle_io::cli::load_scenario(&root.join("data/textbook/scenarios.jsonl"), "sc-00000")
@@ -33,11 +36,8 @@ fn errors(bullet_cmd: [f64; 2], target_cmd: [f64; 2], latency: f64) -> Errors {
     };
     let ctl = planner::PitController::new(&params, sc.mu, model(), model(), s.controller.clone())
         .unwrap();
-    let mut lp = ControlLoop::new(s, ctl, &params, sc.mu, sc.build_road().unwrap(), Vec::new());
-
-    // Two cars 30 m apart (no contact), each under a constant command for a second, so that
-    // the plant's actuators have settled on the commands the prediction assumes.
-    let mut plant = Plant::new(
+    let lp = ControlLoop::new(s, ctl, &params, sc.mu, sc.build_road().unwrap(), Vec::new());
+    let plant = Plant::new(
         &params,
         PlantConfig {
             mu: sc.mu,
@@ -45,6 +45,13 @@ fn errors(bullet_cmd: [f64; 2], target_cmd: [f64; 2], latency: f64) -> Errors {
         },
     )
     .unwrap();
+    (lp, plant, params)
+}
+
+fn errors(bullet_cmd: [f64; 2], target_cmd: [f64; 2], latency: f64) -> Errors {
+    let (mut lp, mut plant, _) = loop_and_plant();
+    // Two cars 30 m apart (no contact), each under a constant command for a second, so that
+    // the plant's actuators have settled on the commands the prediction assumes.
     let car = |x: f64, y: f64, vx: f64| VehicleInit {
         x,
         y,
@@ -162,31 +169,7 @@ fn a_prediction_over_no_time_is_the_measurement() {
 /// 50 ms) and fails this test.
 #[test]
 fn the_prediction_carries_the_push_while_the_cars_touch() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let sc =
-        vehicle_io::cli::load_scenario(&root.join("data/textbook/scenarios.jsonl"), "sc-00000")
-            .unwrap();
-    let params = sc.params.load().unwrap();
-    let s = ControllerIoSettings::default();
-    let dt = s.controller.mpc.dt;
-    let model = || -> Box<dyn TargetModel + Send + Sync> {
-        Box::new(dynamics::target4dof::FourDofTarget::new(
-            &params.target,
-            sc.mu,
-            dt,
-        ))
-    };
-    let ctl = planner::PitController::new(&params, sc.mu, model(), model(), s.controller.clone())
-        .unwrap();
-    let mut lp = ControlLoop::new(s, ctl, &params, sc.mu, sc.build_road().unwrap(), Vec::new());
-    let mut plant = Plant::new(
-        &params,
-        PlantConfig {
-            mu: sc.mu,
-            ..PlantConfig::default()
-        },
-    )
-    .unwrap();
+    let (mut lp, mut plant, params) = loop_and_plant();
     // The target along +x at 18 m/s; the bullet on its left, nose turned 0.15 rad towards
     // it, its front-right corner 5 cm off the target's left side 1 m ahead of the rear
     // bumper, closing at 19 m/s.
