@@ -138,8 +138,8 @@ pub fn node(name: &str) -> Result<Node<Svc>, PortError> {
     Ok(node)
 }
 
-/// Set once SIGINT or SIGTERM has arrived, by [`on_termination`] (and by
-/// [`termination_requested`] when iceoryx2 reports one).
+/// Set once SIGINT or SIGTERM has arrived, by [`on_termination`] (or by
+/// [`catch_termination`], for one that iceoryx2 caught before it).
 static TERMINATION: AtomicBool = AtomicBool::new(false);
 /// The SIGINT and SIGTERM handlers [`on_termination`] replaced and calls on (iceoryx2's, as
 /// addresses; 0: none).
@@ -188,18 +188,12 @@ fn catch_termination(node: &Node<Svc>) {
     });
 }
 
-/// Whether SIGINT or SIGTERM has arrived (checked without blocking). Once true, it stays
-/// true for the life of the process, whatever signal came after it.
+/// Whether SIGINT or SIGTERM has arrived (checked without blocking: one atomic load, no
+/// system call). Once true, it stays true for the life of the process, whatever signal came
+/// after it. The node is the proof that [`node`] installed the handler.
 #[must_use]
-pub fn termination_requested(node: &Node<Svc>) -> bool {
-    if TERMINATION.load(Ordering::SeqCst) {
-        return true;
-    }
-    let requested = node.wait(Duration::ZERO).is_err();
-    if requested {
-        TERMINATION.store(true, Ordering::SeqCst);
-    }
-    requested
+pub fn termination_requested(_node: &Node<Svc>) -> bool {
+    TERMINATION.load(Ordering::SeqCst)
 }
 
 /// Open (or create) a publish-subscribe service with the shared quality of service.
