@@ -73,6 +73,11 @@ def test_bench_writes_the_tables_json_episodes_and_figures(bench_run):
     md = (run / "summary.md").read_text()
     assert "| config | episodes | success % | at rest % | straight % | curved %" in md
     assert "Failure causes" in md
+    # By the target's speed: every band, each scene in one of them.
+    for s in doc["configs"].values():
+        assert [b["band"] for b in s["by_speed"]] == ["< 10", "10–15", "15–20", "≥ 20"]
+        assert sum(b["episodes"] for b in s["by_speed"]) == s["episodes"]
+    assert "| picopinn | ≥ 20 |" in md
     # Paired comparison: every pair once, its counts agree with the per-configuration successes.
     assert "Paired comparison" in md
     assert len(doc["paired"]) == len(PRESETS) * (len(PRESETS) - 1) // 2
@@ -294,3 +299,31 @@ def test_the_exact_mcnemar_test_and_the_paired_counts():
     # scene 3 only x ran, scene 4 only y: neither counts
     assert (p["scenes"], p["only_a"], p["only_b"], p["both"]) == (3, 1, 1, 1)
     assert p["mcnemar_p"] == 1.0
+
+
+def test_success_by_target_speed_counts_bands_and_speeds_at_reversal():
+    from picopit.bench_summary import by_speed, markdown
+
+    meta = {0: {"target_speed": 8.0}, 1: {"target_speed": 12.0}, 2: {"target_speed": 14.9},
+            3: {"target_speed": 15.0}, 4: {"target_speed": 22.0}, 5: {"target_speed": 25.0}}
+    nan = float("nan")
+    rows = [
+        {"index": 0, "success": True, "reversed_at": 3.0, "reversed_speed": 1.0},
+        {"index": 1, "success": False, "reversed_at": None, "reversed_speed": None},
+        {"index": 2, "success": True, "reversed_at": 4.0, "reversed_speed": 3.0},
+        {"index": 3, "success": False, "reversed_at": nan, "reversed_speed": nan},  # never reversed
+        {"index": 4, "success": False, "reversed_at": 5.0, "reversed_speed": 12.0},
+        {"index": 5, "success": False, "reversed_at": 5.5, "reversed_speed": 14.0},
+    ]
+    b = {x["band"]: x for x in by_speed(rows, meta)}
+    assert [b[k]["episodes"] for k in ("< 10", "10–15", "15–20", "≥ 20")] == [1, 2, 1, 2]
+    assert b["10–15"]["success_rate"] == pytest.approx(50.0) and b["10–15"]["reversed_rate"] == pytest.approx(50.0)
+    assert b["10–15"]["reversed_speed_success_median"] == 3.0
+    assert b["10–15"]["reversed_speed_lost_median"] is None
+    assert b["15–20"]["reversed_rate"] == 0.0 and b["15–20"]["reversed_speed_lost_median"] is None
+    # The fast targets: both turned round, both lost, at 12 and 14 m/s.
+    assert b["≥ 20"]["success_rate"] == 0.0 and b["≥ 20"]["reversed_rate"] == 100.0
+    assert b["≥ 20"]["reversed_speed_lost_median"] == pytest.approx(13.0)
+    md = markdown({"x": {"by_speed": list(b.values())}})
+    assert "| x | ≥ 20 | 2 | 0.0 | 100.0 | 13.0 | – |" in md
+

@@ -3,7 +3,7 @@ comparison, and the tables and files they are written to.
 
 * ``summarise``: one row of metrics per configuration (success overall, by road and adhesion
   band, heading error, safety margin, violation and collision rates, pooled planning and control
-  times, failure causes, the funnel);
+  times, failure causes, the funnel, and ``by_speed``: by the target's initial speed);
 * ``paired`` and ``mcnemar_exact_p``: every pair of configurations on the scenes both ran;
 * ``markdown`` and ``write_csv``: ``summary.md`` and ``summary.csv``;
 * ``episode_table`` and ``write_episodes``: ``episodes.parquet`` (``episodes.csv`` without
@@ -26,6 +26,9 @@ from . import funnel
 from .bench_checks import finite_or_none
 
 BANDS = ("low", "mid", "high")
+# The target's initial speed (m/s): label, lower bound (inclusive), upper bound (exclusive).
+SPEED_BANDS: Tuple[Tuple[str, float, float], ...] = (
+    ("< 10", 0.0, 10.0), ("10–15", 10.0, 15.0), ("15–20", 15.0, 20.0), ("≥ 20", 20.0, math.inf))
 CAUSES = ("decision_infeasible", "no_termination", "boundary_violation", "secondary_collision",
           "unsafe_rebound")
 ERROR_CAUSE = "error"
@@ -93,7 +96,34 @@ def summarise(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str,
         for c in CAUSES + (ERROR_CAUSE,):
             s[f"fail_{c}"] = _pct(sum(r.get("cause") == c for r in rs), n)
         s["funnel"] = funnel.funnel(rs)
+        s["by_speed"] = by_speed(rs, meta)
         out[name] = s
+    return out
+
+
+def _reversed(r: Mapping[str, Any]) -> bool:
+    return _finite(r.get("reversed_at")) is not None
+
+
+def by_speed(rs: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str, Any]]) -> List[Dict[str, Any]]:
+    """One configuration's episodes by the target's initial speed (``SPEED_BANDS``): how many,
+    the share saved and the share turned round, and the median speed (m/s) at the moment of
+    reversal of the reversed targets that were lost and of the successes: a target turned
+    round with speed left rolls on backwards, and that is where fast scenes are lost."""
+    out = []
+    for label, lo, hi in SPEED_BANDS:
+        sub = [r for r in rs if (v := _finite(meta[r["index"]].get("target_speed"))) is not None and lo <= v < hi]
+        lost = [_finite(r.get("reversed_speed")) for r in sub if _reversed(r) and not r["success"]]
+        won = [_finite(r.get("reversed_speed")) for r in sub if _reversed(r) and r["success"]]
+        lost = [v for v in lost if v is not None]
+        won = [v for v in won if v is not None]
+        out.append({
+            "band": label, "episodes": len(sub),
+            "success_rate": _pct(sum(bool(r["success"]) for r in sub), len(sub)),
+            "reversed_rate": _pct(sum(_reversed(r) for r in sub), len(sub)),
+            "reversed_speed_lost_median": _finite(np.median(lost)) if lost else None,
+            "reversed_speed_success_median": _finite(np.median(won)) if won else None,
+        })
     return out
 
 
@@ -180,6 +210,19 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
     lines.append("")
     lines.append(funnel.markdown({name: s["funnel"] for name, s in summary.items() if "funnel" in s}))
     lines.append("")
+    lines.append("By the target's initial speed (m/s): success and reversed shares, and the median speed "
+                 "(m/s) at the moment of reversal of the reversed targets lost afterwards and of the "
+                 "successes:")
+    lines.append("")
+    lines.append("| config | target speed | episodes | success % | reversed % | speed at reversal, lost | "
+                 "speed at reversal, success |")
+    lines.append("|---|---|---|---|---|---|---|")
+    for name, s in summary.items():
+        for b in s.get("by_speed", ()):
+            lines.append(f"| {name} | {b['band']} | {b['episodes']} | {_fmt(b['success_rate'])} | "
+                         f"{_fmt(b['reversed_rate'])} | {_fmt(b['reversed_speed_lost_median'])} | "
+                         f"{_fmt(b['reversed_speed_success_median'])} |")
+    lines.append("")
     if pairs:
         lines.append("Paired comparison (the same scenes and seeds; exact McNemar test on the scenes "
                      "only one of the two saved):")
@@ -195,8 +238,8 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
 
 def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     """The scalar metrics, one row per configuration (the funnel's stage counts flattened to
-    ``funnel_<stage>``; its losses are in summary.json and summary.md)."""
-    flat = {name: {**{k: v for k, v in s.items() if k != "funnel"},
+    ``funnel_<stage>``; its losses and the speed bands are in summary.json and summary.md)."""
+    flat = {name: {**{k: v for k, v in s.items() if k not in ("funnel", "by_speed")},
                    **{f"funnel_{st}": s["funnel"][st] for st in funnel.STAGES if "funnel" in s}}
             for name, s in summary.items()}
     summary = flat
