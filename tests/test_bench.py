@@ -327,3 +327,32 @@ def test_success_by_target_speed_counts_bands_and_speeds_at_reversal():
     md = markdown({"x": {"by_speed": list(b.values())}})
     assert "| x | ≥ 20 | 2 | 0.0 | 100.0 | 13.0 | – |" in md
 
+
+def test_controller_settings_files_override_the_presets_and_bad_ones_are_named(tmp_path, monkeypatch, capsys):
+    from picopit.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    base = ["bench", "--scenarios", str(SCENARIOS), "--models", str(MODELS), "--no-progress", "--limit", "1",
+            "--configs", "picopinn", "--clock", "simulated", "--no-figures"]
+    (tmp_path / "bad.toml").write_text("[planner]\nwindow = -1.0\n")
+    (tmp_path / "broken.toml").write_text("[planner\n")
+    (tmp_path / "off.toml").write_text("upper_layer = false\n")
+    for args, needle in ((["--controller-config", "bad.toml"], "--controller-config: "),
+                         (["--controller-config-half-scale", "bad.toml"], "--controller-config-half-scale: "),
+                         (["--controller-config", "broken.toml"], "--controller-config broken.toml: "),
+                         (["--controller-config", "missing.toml"], "missing.toml: No such file"),
+                         # Each override is checked alone: the bad one is named, not the first given.
+                         (["--uncertainty", '{"latency": 0.02}', "--controller-config", "bad.toml"],
+                          "--controller-config: ")):
+        assert main(base + args) == 2
+        err = capsys.readouterr().err
+        assert needle in err, err
+        if "bad.toml" in args:
+            assert "window" in err, "names the field"
+    # The settings reach the controller: with the upper layer switched off nothing plans.
+    assert main(base + ["--controller-config", "off.toml", "--out", "off"]) == 0
+    doc = json.loads((tmp_path / "off" / "summary.json").read_text())
+    assert doc["configs"]["picopinn"]["plan_ms_median"] is None
+    assert doc["run"]["controller"] == {"upper_layer": False} and doc["run"]["controller_half_scale"] is None
+    assert main(base + ["--out", "on"]) == 0
+    assert json.loads((tmp_path / "on" / "summary.json").read_text())["configs"]["picopinn"]["plan_ms_median"] > 0

@@ -122,6 +122,10 @@ class BenchConfig:
     clock: str = "wall"
     # The target's gear: "forward" (its powertrain engaged) or "neutral" (for comparison).
     target_gear: str = "forward"
+    # Controller settings over every configuration's, for the full-size and the half-scale
+    # scenes (a TOML document as a dict: `load_controller_config`); None keeps the presets'.
+    controller: Optional[Dict[str, Any]] = None
+    controller_half_scale: Optional[Dict[str, Any]] = None
 
     def validate(self) -> "BenchConfig":
         known = list(_core.episode_presets())
@@ -148,22 +152,28 @@ class BenchConfig:
             raise BenchError(f"--scenarios: {self.scenarios}: no such file")
         if not self.models.is_dir():
             raise BenchError(f"--models: {self.models}: no such folder")
-        if self.uncertainty is not None:
-            # Validate once up front: the core names the bad field.
-            try:
-                _core.episode_config(self.episode_config(self.configs[0]))
-            except _core.EpisodeError as e:
-                raise BenchError(f"--uncertainty: {e}") from None
+        # Validate each override once up front, alone: the core names the bad field.
+        for key, option in (("uncertainty", "--uncertainty"), ("controller", "--controller-config"),
+                            ("controller_half_scale", "--controller-config-half-scale")):
+            if getattr(self, key) is not None:
+                try:
+                    _core.episode_config(self.episode_config(self.configs[0], {key: getattr(self, key)}))
+                except _core.EpisodeError as e:
+                    raise BenchError(f"{option}: {e}") from None
         return self
 
-    def episode_config(self, name: str) -> str:
+    def overrides(self) -> Dict[str, Any]:
+        """The episode configuration's fields this run sets over every preset's."""
+        return {k: v for k, v in (("uncertainty", self.uncertainty), ("controller", self.controller),
+                                  ("controller_half_scale", self.controller_half_scale)) if v is not None}
+
+    def episode_config(self, name: str, overrides: Optional[Mapping[str, Any]] = None) -> str:
         """The configuration text handed to the core: a preset name, or the preset with the
-        uncertainty override and the clock as JSON."""
-        if self.uncertainty is None and self.clock == "wall" and self.target_gear == "forward":
+        clock, the target's gear and the overrides (default: all of this run's) as JSON."""
+        over = self.overrides() if overrides is None else dict(overrides)
+        if not over and self.clock == "wall" and self.target_gear == "forward":
             return name
-        doc: Dict[str, Any] = {"preset": name, "clock": self.clock, "target_gear": self.target_gear}
-        if self.uncertainty is not None:
-            doc["uncertainty"] = self.uncertainty
+        doc: Dict[str, Any] = {"preset": name, "clock": self.clock, "target_gear": self.target_gear, **over}
         return json.dumps(doc)
 
     def n_workers(self) -> int:
@@ -172,6 +182,22 @@ class BenchConfig:
 
 def parse_configs(text: str) -> Tuple[str, ...]:
     return tuple(c.strip() for c in text.split(",") if c.strip())
+
+
+def load_controller_config(path: Optional[str], option: str) -> Optional[Dict[str, Any]]:
+    """A controller settings TOML file as a dict (`None` for no file); a file that cannot be
+    read or parsed is a :class:`BenchError` naming the option and the file. Its fields are
+    checked by the core with the episode configuration (``BenchConfig.validate``)."""
+    if path is None:
+        return None
+    from . import _toml  # tomllib, or tomli before Python 3.11
+
+    try:
+        return _toml.loads(Path(path).read_text())
+    except OSError as e:
+        raise BenchError(f"{option} {path}: {e.strerror or e}") from None
+    except ValueError as e:
+        raise BenchError(f"{option} {path}: {e}") from None
 
 
 def parse_uncertainty(text: str) -> Dict[str, Any]:
@@ -390,7 +416,8 @@ def write_outputs(res: BenchResult, cfg: BenchConfig, out: Path, extra: Mapping[
     info.update(scenarios=str(cfg.scenarios), scene_set="full" if cfg.full else f"stratified subset of {cfg.subset}",
                 scenes=len(res.scenes), limit=cfg.limit, configs=list(cfg.configs), seed=cfg.seed,
                 workers=cfg.n_workers(), ray_address=cfg.ray_address, uncertainty=cfg.uncertainty,
-                target_gear=cfg.target_gear,
+                target_gear=cfg.target_gear, controller=cfg.controller,
+                controller_half_scale=cfg.controller_half_scale,
                 seconds=round(res.seconds, 2), machine=machine(), notes=res.notes,
                 scene_ids=[res.meta[i]["id"] for i in res.scenes])
     header = (f"# picopit bench\n\n`{info.get('command', 'picopit bench')}` — {info.get('created', '')}, "

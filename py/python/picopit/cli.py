@@ -143,6 +143,13 @@ def _bench_parser(sub) -> None:
                    help="the target's gear: forward (its powertrain engaged: engine braking, a stall that "
                         "holds the driven axle; default) or neutral (it rolls freely once let go: for "
                         "comparison)")
+    p.add_argument("--controller-config", metavar="TOML",
+                   help="controller settings for the full-size scenes over each configuration's (the "
+                        "[planner], [phases], [mpc] tables of docs/planner.md; fields not given keep "
+                        "theirs, e.g. the ablation's upper layer stays off)")
+    p.add_argument("--controller-config-half-scale", metavar="TOML",
+                   help="the same for the half-scale scenes (over the built-in "
+                        "configs/controller_half_scale.toml)")
     p.add_argument("--out", metavar="DIR", help="run folder (default runs/bench-<timestamp>)")
     p.add_argument("--json", metavar="PATH", help="also write the summary JSON here")
     p.add_argument("--workers", type=int, default=0, metavar="W", help="worker processes (default 0: all cores)")
@@ -421,6 +428,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         uncertainty=bench.parse_uncertainty(args.uncertainty) if args.uncertainty else None,
         cases=not args.no_figures, figures=not args.no_figures, clock=args.clock,
         target_gear=args.target_gear,
+        controller=bench.load_controller_config(args.controller_config, "--controller-config"),
+        controller_half_scale=bench.load_controller_config(args.controller_config_half_scale,
+                                                           "--controller-config-half-scale"),
     ).validate()
     out = Path(args.out) if args.out else Path("runs") / ("bench-" + _dt.datetime.now().strftime("%Y%m%d-%H%M%S"))
     check_dir(out, "--out")
