@@ -48,6 +48,18 @@ fn loop_and_plant() -> (ControlLoop, Plant, ParamSet) {
     (lp, plant, params)
 }
 
+/// The plant's states now as a noise-free estimate, with the commands last applied.
+fn measured(plant: &Plant, target_input: [f64; 2], bullet_applied: [f64; 2]) -> StateEstimate {
+    let mut m = StateEstimate {
+        target_input,
+        bullet_applied,
+        ..StateEstimate::default()
+    };
+    m.target.copy_from_slice(plant.target_state().as_slice());
+    m.bullet.copy_from_slice(plant.bullet_state().as_slice());
+    m
+}
+
 fn errors(bullet_cmd: [f64; 2], target_cmd: [f64; 2], latency: f64) -> Errors {
     let (mut lp, mut plant, _) = loop_and_plant();
     // Two cars 30 m apart (no contact), each under a constant command for a second, so that
@@ -65,13 +77,7 @@ fn errors(bullet_cmd: [f64; 2], target_cmd: [f64; 2], latency: f64) -> Errors {
     plant.set_target_command(target_cmd[0], target_cmd[1]);
     plant.advance(1.0);
 
-    let mut m = StateEstimate {
-        target_input: target_cmd,
-        bullet_applied: bullet_cmd,
-        ..StateEstimate::default()
-    };
-    m.target.copy_from_slice(plant.target_state().as_slice());
-    m.bullet.copy_from_slice(plant.bullet_state().as_slice());
+    let m = measured(&plant, target_cmd, bullet_cmd);
     let (xt, xb) = lp.predict(&m, latency);
     plant.advance(latency);
     let (tt, tb) = (plant.target_state(), plant.bullet_state());
@@ -205,12 +211,7 @@ fn the_prediction_carries_the_push_while_the_cars_touch() {
     assert!(plant.contact().is_some(), "still pushing");
     for latency in [0.05, 0.1] {
         let mut p = plant.clone();
-        let mut m = StateEstimate {
-            bullet_applied: bullet_cmd,
-            ..StateEstimate::default()
-        };
-        m.target.copy_from_slice(p.target_state().as_slice());
-        m.bullet.copy_from_slice(p.bullet_state().as_slice());
+        let m = measured(&p, [0.0, 0.0], bullet_cmd);
         let (xt, xb) = lp.predict(&m, latency);
         p.advance(latency);
         let (tt, tb) = (p.target_state(), p.bullet_state());
