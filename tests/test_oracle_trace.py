@@ -95,7 +95,8 @@ def test_trace_shows_the_contact_and_the_outcome(tmp_path, capsys):
     assert contact, out
     assert any(" pit " in f" {' '.join(r.values())} " for r in rows)
     plans = [l for l in lines if l.startswith("plan at")]
-    assert any(": pit, push " in l and "peak" in l for l in plans), "the PIT plan and its push"
+    assert any(": pit, " in l and " side, push " in l and "peak" in l for l in plans), \
+        "the PIT plan, its side and its push"
     metrics = [l for l in lines if l.startswith("metrics:")][0]
     assert "contacts " in metrics and "success " in metrics
     data = np.genfromtxt(csv, delimiter=",", names=True)
@@ -106,6 +107,20 @@ def test_trace_shows_the_contact_and_the_outcome(tmp_path, capsys):
     assert first["bullet_s"] < first["target_s"] and abs(first["bullet_d"] - first["target_d"]) > 2.0
     assert np.all(np.abs(data["target_dpsi"]) <= np.pi + 1e-9)
     assert png.stat().st_size > 10_000
+
+
+def test_trace_names_why_a_plan_aborts(capsys):
+    """Textbook sc-00133 ends "decision infeasible": its plans say why they abort (the
+    infeasibility the upper layer found) and every plan names its side."""
+    rc = cli.main(["trace", "sc-00133", "--scenarios", str(TEXTBOOK), "--every", "100", "--plans"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    plans = [l for l in out.splitlines() if l.startswith("plan at")]
+    aborts = [l for l in plans if ": abort" in l]
+    assert aborts, out
+    assert all(": abort (" in l and ")," in l for l in aborts), aborts
+    assert all(" left side, " in l or " right side, " in l for l in plans), plans
+    assert not any(": chase (" in l or ": pit (" in l for l in plans), "no reason without an abort"
 
 
 def test_trace_matches_the_episode_the_benchmark_runs():

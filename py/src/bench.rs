@@ -62,7 +62,8 @@ fn trajectory_columns() -> Vec<String> {
 /// Run one closed-loop episode: `scenario` is one scenario as JSON text, `config` a preset
 /// name or a JSON configuration, `seed` seeds the sensing noise and actuator errors. With
 /// `record` the result holds the trajectory (one row per control step) and the upper
-/// layer's plans (`plans`: `time`, `mode`, `push_from`, `push_to`, `push_peak`,
+/// layer's plans (`plans`: `time`, `mode`, `reason` (why an abort: the race lost or the
+/// infeasibility, else None), `side`, `push_from`, `push_to`, `push_peak`,
 /// `predicted_heading_error`; empty without `record`). The GIL is
 /// released while the episode runs.
 #[pyfunction]
@@ -145,6 +146,15 @@ fn run_episode<'py>(
                 .ok()
                 .and_then(|v| v.as_str().map(str::to_owned)),
         )?;
+        plan.set_item(
+            "reason",
+            if p.race_lost {
+                Some("race lost".to_owned())
+            } else {
+                p.infeasible.map(|i| i.describe().to_owned())
+            },
+        )?;
+        plan.set_item("side", if p.side_sign > 0.0 { "left" } else { "right" })?;
         plan.set_item("push_from", pushed.first().map(|s| s.0))?;
         plan.set_item("push_to", pushed.last().map(|s| s.0 + dt))?;
         plan.set_item(

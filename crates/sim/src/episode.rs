@@ -198,6 +198,12 @@ pub struct PlanRecord {
     /// When the plan was made (s).
     pub time: f64,
     pub mode: planner::Mode,
+    /// Why no feasible decision exists, when the plan is an abort for want of one.
+    #[serde(default)]
+    pub infeasible: Option<planner::Infeasible>,
+    /// The plan gave up because the race is lost (the target fails on its own first).
+    #[serde(default)]
+    pub race_lost: bool,
     /// The reversed heading ψ_rev of the plan's terminal set (rad).
     pub reversed_heading: f64,
     /// The plan's predicted heading error at the end of its look-ahead (rad).
@@ -237,6 +243,8 @@ impl PlanRecord {
         Self {
             time: p.time,
             mode: p.mode,
+            infeasible: p.infeasible,
+            race_lost: p.race_lost,
             reversed_heading: p.terminal.heading,
             predicted_heading_error: p.predicted_heading_error,
             predicted: p

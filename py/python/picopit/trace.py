@@ -99,8 +99,10 @@ class Trace:
         for p in self.result.get("plans") or []:
             window = ("none" if p["push_from"] is None
                       else f"{p['push_from']:.2f}-{p['push_to']:.2f} s, peak {p['push_peak']:.0f} N")
-            out.append(f"plan at {p['time']:5.2f} s: {p['mode']}, push {window}, "
-                       f"predicted heading error {p['predicted_heading_error']:.3f} rad")
+            why = f" ({p['reason']})" if p.get("reason") else ""
+            out.append(f"plan at {p['time']:5.2f} s: {p['mode']}{why}, {p.get('side', '?')} side, "
+                       f"push {window}, predicted heading error "
+                       f"{p['predicted_heading_error']:.3f} rad")
         return out
 
     def metrics(self) -> str:
