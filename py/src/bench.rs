@@ -63,7 +63,7 @@ fn trajectory_columns() -> Vec<String> {
 /// name or a JSON configuration, `seed` seeds the sensing noise and actuator errors. With
 /// `record` the result holds the trajectory (one row per control step) and the upper
 /// layer's plans (`plans`: `time`, `mode`, `reason` (why an abort: the race lost or the
-/// infeasibility, else None), `side`, `push_from`, `push_to`, `push_peak`,
+/// infeasibility, else None), `side`, `push_from`, `push_to`, `push_peak`, `push_impulse` (∫F_n dt, N s),
 /// `predicted_heading_error`; empty without `record`). The GIL is
 /// released while the episode runs.
 #[pyfunction]
@@ -160,6 +160,10 @@ fn run_episode<'py>(
         plan.set_item(
             "push_peak",
             pushed.iter().map(|s| s.2[0]).fold(0.0, f64::max),
+        )?;
+        plan.set_item(
+            "push_impulse",
+            pushed.iter().map(|s| s.2[0] * dt).sum::<f64>(),
         )?;
         plan.set_item("predicted_heading_error", p.predicted_heading_error)?;
         plans.append(plan)?;

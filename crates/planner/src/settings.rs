@@ -384,7 +384,9 @@ pub struct PhaseSettings {
     pub monitor_speed: f64,
     /// Safety monitor: the bullet's least clearance to an obstacle (m).
     pub bullet_clearance_min: f64,
-    /// Braking of the safe stop (stabilisation, done, abort) as a fraction of μ g.
+    /// Braking of the safe stop (stabilisation, done, abort) as a fraction of μ g: all the
+    /// road gives by default, so that the bullet drops back out of the spinning target's
+    /// sweep (a spun target slows at up to μ g).
     pub abort_brake: f64,
     /// Consecutive infeasible decisions while chasing before the maneuver is aborted (the
     /// situation often changes within a replanning period: a curve ends, the target slows).
@@ -408,7 +410,7 @@ impl Default for PhaseSettings {
             bullet_slip_max: 0.35,
             monitor_speed: 3.0,
             bullet_clearance_min: 0.2,
-            abort_brake: 0.8,
+            abort_brake: 1.0,
             infeasible_patience: 3,
         }
     }

@@ -9,16 +9,18 @@
 //! then runs on to `T_max` with the driver reacting to the "contact" as in an episode. The
 //! scenario is *ideally feasible* if one shove ends in success by the benchmark's own test
 //! ([`Monitor`]: reversed and at rest, or settled reversed at `T_max`; no boundary
-//! violation or obstacle hit), the bullet itself ignored.
+//! violation or obstacle hit). The bullet itself is not simulated; only a side where it
+//! fits beside the target at the contact, inside the road, is tried
+//! ([`OracleSettings::bullet_beside`]).
 //!
-//! The bound is optimistic about the bullet (it is anywhere, at once, and leaves nothing
+//! The bound is optimistic about the bullet (it is at its pose at once, and leaves nothing
 //! behind to hit) and restrictive about the push (one impulse, no sustained push or
 //! follow-up). It measures how much of the dataset a PIT can save at all.
 
 use crate::outcome::{FailureCause, Monitor, Observation, Outcome, Status};
 use crate::scenario::{Scenario, ScenarioError};
 use crate::screen::{reach_time, target_alone, ScreenSettings};
-use dynamics::geometry::{rotate, Vec2};
+use dynamics::geometry::{rotate, Obb, Pose2, Vec2};
 use dynamics::plant::{Plant, Which};
 use serde::{Deserialize, Serialize};
 
@@ -42,6 +44,11 @@ pub struct OracleSettings {
     pub window: Option<[f64; 2]>,
     /// Screening settings for the bullet's reach bound.
     pub screen: ScreenSettings,
+    /// Only shoves from a side where a bullet fits: beside the target at the contact, parallel
+    /// to it and flush against its side with its front at the contact point, its footprint
+    /// inside the road (the benchmark judges the bullet's footprint too). Without it a shove
+    /// may come from where no bullet can be, beyond a road edge.
+    pub bullet_beside: bool,
 }
 
 impl Default for OracleSettings {
@@ -55,6 +62,7 @@ impl Default for OracleSettings {
             sides: vec![1.0, -1.0],
             window: None,
             screen: ScreenSettings::default(),
+            bullet_beside: true,
         }
     }
 }
@@ -279,6 +287,26 @@ impl Snapshots {
         })
     }
 
+    /// Whether a bullet beside the target of `snap` on `side` at the PIT contact (parallel to
+    /// the target, flush against its side, its front at the contact point `back` behind the
+    /// rear axle) has its footprint inside the road.
+    fn bullet_fits(&self, snap: &Alone, side: f64, back: f64) -> bool {
+        let (pt, pb) = (&self.params.target, &self.params.bullet);
+        let b = *snap.plant.body(Which::Target);
+        let rel = Vec2::new(
+            -(pt.lr + back) - pb.cg_to_front,
+            side * 0.5 * (pt.width + pb.width),
+        );
+        let at = b.pos + rotate(b.yaw, rel);
+        let fp = Obb::vehicle_footprint(
+            &Pose2::new(at.x, at.y, b.yaw),
+            pb.length,
+            pb.width,
+            pb.cg_to_front,
+        );
+        snap.road.edge_distance(&fp) >= 0.0
+    }
+
     /// Shove a copy of `snap` and run it to the verdict.
     fn try_shove(
         &self,
@@ -297,6 +325,17 @@ impl Snapshots {
                 let t = run.time();
                 run.held = Some(run.driver.command(t, None, &x, &run.road));
             }
+        }
+        if settings.bullet_beside && !self.bullet_fits(&run, side, settings.contact_back) {
+            // No bullet can push from here: the shove fails as the bullet would, over the edge.
+            let time = run.time();
+            return (
+                Outcome::Failure {
+                    cause: FailureCause::BoundaryViolation,
+                    time,
+                },
+                false,
+            );
         }
         run.shove(side, dv, pt.lr, pt.width, settings.contact_back);
         let outcome = loop {

@@ -135,3 +135,32 @@ fn holding_the_command_is_not_knowing_the_drivers_law() {
         "the driver's braking matters after a shove"
     );
 }
+
+/// The dataset's sc-00184 (straight urban road, the target in the left lane 2.0 m from the
+/// edge, braking after the contact): a shove on its left side spins it round inside the
+/// road, but no bullet fits beside it there, so with the bullet's room checked that side
+/// saves nothing; on its right side, where a bullet fits, the check changes nothing.
+#[test]
+fn a_shove_counts_only_from_a_side_where_a_bullet_fits_inside_the_road() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenarios.jsonl");
+    let all = sim::load_jsonl(path).unwrap();
+    let sc = all.iter().find(|s| s.id == "sc-00184").unwrap();
+    let side = |sides: &[f64], beside: bool| OracleSettings {
+        sides: sides.to_vec(),
+        bullet_beside: beside,
+        exhaustive: true,
+        time_step: 0.25,
+        window: Some([3.0, 4.5]),
+        ..shoves(&[1.0, 1.5, 2.0, 2.5, 3.0])
+    };
+    let left_free = ideal_pit(sc, &side(&[1.0], false)).unwrap();
+    assert!(left_free.successes > 0, "{left_free:?}");
+    let left = ideal_pit(sc, &side(&[1.0], true)).unwrap();
+    assert_eq!(left.tried, left_free.tried, "{left:?}");
+    assert_eq!(left.successes, 0, "{left:?}");
+    assert!(left.feasible.is_none());
+    let right_free = ideal_pit(sc, &side(&[-1.0], false)).unwrap();
+    let right = ideal_pit(sc, &side(&[-1.0], true)).unwrap();
+    assert!(right.tried > 0);
+    assert_eq!(right, right_free);
+}

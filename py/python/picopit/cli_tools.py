@@ -46,7 +46,7 @@ def _oracle_parser(sub) -> None:
     p.add_argument("--settings", metavar="JSON",
                    help="oracle settings over the defaults, e.g. '{\"shoves\": [0.5, 1, 2, 3], "
                         "\"time_step\": 0.1}' (fields: shoves, time_step, contact_back, min_remaining, "
-                        "exhaustive, sides, window)")
+                        "exhaustive, sides, window, bullet_beside)")
     p.add_argument("--workers", type=int, default=1, metavar="W", help="scenes at a time (threads; default 1)")
     p.add_argument("--scene-lines", action="store_true", help="also print one line per scene")
     p.add_argument("--json", metavar="PATH", help="write the settings, per-scene results and summary here")

@@ -5,8 +5,10 @@ contact time from the bullet's earliest arrival on, on either side, its rear qua
 instantaneous lateral shove of each size of the grid (a velocity change ``dv`` of its c.g.),
 and the plant runs on to ``T_max`` with the driver reacting. The scenario is *ideally
 feasible* when one shove ends in success by the benchmark's own test (``sim::oracle``, the
-Rust core; ``_core.ideal_pit``). The bound is optimistic about the bullet (anywhere, at
-once) and restrictive about the push (one impulse, no sustained push).
+Rust core; ``_core.ideal_pit``). A shove counts only from a side where a bullet fits beside
+the target inside the road (setting ``bullet_beside``, default true). The bound is optimistic
+about the bullet (at its pose at once) and restrictive about the push (one impulse, no
+sustained push).
 
 With ``tiers`` the whole grid is simulated twice, with the driver's true law and with its
 command held from the shove on, and eight choices are judged in the truth
