@@ -9,11 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from picopit import _core, cli, oracle, trace
+from picopit import _core, bench, cli, oracle, trace
 
 ROOT = Path(__file__).resolve().parents[1]
 TEXTBOOK = ROOT / "data" / "textbook" / "scenarios.jsonl"
 TRIALS = ROOT / "data" / "trials" / "half_scale.jsonl"
+DATASET = ROOT / "data" / "scenarios.jsonl"
 
 
 def test_oracle_finds_a_feasible_push_on_two_textbook_scenes(tmp_path, capsys):
@@ -62,6 +63,14 @@ def test_oracle_tiers_judge_choices_in_the_truth():
     assert r["shoves"] > 0 and r["shoves"] % 8 == 0  # 4 sizes x 2 sides x the times
 
 
+def test_oracle_subset_is_the_benchmarks_stratified_subset():
+    """--subset N picks the scenes picopit bench would run for N: the same ids, in file order."""
+    scenarios = [json.loads(line) for line in open(DATASET)]
+    chosen = oracle.select(scenarios, subset=16)
+    assert [s["id"] for s in chosen] == [scenarios[i]["id"] for i in bench.stratified_subset(scenarios, 16)]
+    assert len({(s["category"], s["adhesion"]) for s in chosen}) >= 6, "every stratum is drawn"
+
+
 @pytest.mark.parametrize("argv, words", [
     (["--settings", '{"shoves": []}'], "shoves"),
     (["--settings", '{"time_step": 0}'], "time_step"),
@@ -70,6 +79,8 @@ def test_oracle_tiers_judge_choices_in_the_truth():
     (["--ids", "sc-99999"], "sc-99999"),
     (["--first", "100000"], "--first"),
     (["--workers", "0"], "--workers"),
+    (["--subset", "0"], "--subset"),
+    (["--subset", "8", "--n", "4"], "--subset"),
 ])
 def test_oracle_refuses_bad_input_naming_it(capsys, argv, words):
     rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--no-progress", *argv])

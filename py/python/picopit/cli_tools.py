@@ -40,6 +40,9 @@ def _oracle_parser(sub) -> None:
     p.add_argument("--first", type=int, default=0, metavar="K", help="skip the first K scenes (default 0)")
     p.add_argument("--n", type=int, default=None, metavar="N", help="at most N scenes (default: all)")
     p.add_argument("--ids", metavar="LIST", help="comma-separated scene ids instead of --first/--n")
+    p.add_argument("--subset", type=int, metavar="N",
+                   help="the benchmark's stratified subset of N scenes (as picopit bench picks its "
+                        "default 128) instead of --first/--n")
     p.add_argument("--tiers", action="store_true",
                    help="the tiers (the whole grid twice per scene; default grid 10 sizes 0.4-3.15 m/s "
                         "every 0.1 s)")
@@ -64,7 +67,9 @@ def _cmd_oracle(args: argparse.Namespace) -> int:
     settings = oracle.resolve_settings(args.settings, args.tiers)
     scenarios = _core.load_scenarios(str(args.scenarios))
     ids = [i.strip() for i in args.ids.split(",") if i.strip()] if args.ids else None
-    scenes = oracle.select(scenarios, args.first, args.n, ids)
+    if args.subset is not None and (ids or args.n is not None or args.first):
+        raise oracle.OracleError("--subset: give it alone, not with --ids, --first or --n")
+    scenes = oracle.select(scenarios, args.first, args.n, ids, args.subset)
     res = oracle.run(scenes, settings, tiers=args.tiers, workers=args.workers, progress=not args.no_progress)
     if args.scene_lines:
         for s in res.scenes:

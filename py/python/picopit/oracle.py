@@ -129,9 +129,17 @@ def resolve_settings(text: Optional[str], tiers: bool) -> Dict[str, Any]:
 
 
 def select(scenarios: Sequence[Mapping[str, Any]], first: int = 0, n: Optional[int] = None,
-           ids: Optional[Sequence[str]] = None) -> List[Mapping[str, Any]]:
-    """Scenes ``first .. first + n`` of the file, or those named by ``ids`` (in the given order);
-    raises :class:`OracleError` for an unknown id or an empty selection."""
+           ids: Optional[Sequence[str]] = None, subset: Optional[int] = None) -> List[Mapping[str, Any]]:
+    """Scenes ``first .. first + n`` of the file, those named by ``ids`` (in the given order), or
+    the benchmark's stratified ``subset`` of that many scenes (``bench.stratified_subset``, as
+    ``picopit bench`` picks them); raises :class:`OracleError` for an unknown id, a bad size or
+    an empty selection."""
+    if subset is not None:
+        if subset < 1:
+            raise OracleError(f"--subset {subset}: need at least 1 scene")
+        from .bench import stratified_subset
+
+        return [scenarios[i] for i in stratified_subset(scenarios, subset)]
     if ids:
         by_id = {s["id"]: s for s in scenarios}
         missing = [i for i in ids if i not in by_id]
