@@ -106,7 +106,7 @@ def test_trace_shows_the_contact_and_the_outcome(tmp_path, capsys):
     assert contact, out
     assert any(" pit " in f" {' '.join(r.values())} " for r in rows)
     plans = [l for l in lines if l.startswith("plan at")]
-    assert any(": pit, " in l and " side, push " in l and "peak" in l for l in plans), \
+    assert any(": pit, " in l and " side, push " in l and "peak" in l and " kN s" in l for l in plans), \
         "the PIT plan, its side and its push"
     metrics = [l for l in lines if l.startswith("metrics:")][0]
     assert "contacts " in metrics and "success " in metrics

@@ -645,8 +645,8 @@ class EpisodeResult(TypedDict):
     """Every control time (ms) of the episode (steps the MPC ran)."""
     #: with ``record``, the upper layer's plans: ``time``, ``mode``, ``reason`` (why an
     #: abort: ``"race lost"`` or the infeasibility; else None), ``side`` (``"left"`` or
-    #: ``"right"``), ``push_from``, ``push_to``, ``push_peak``, ``predicted_heading_error``
-    #: (empty without)
+    #: ``"right"``), ``push_from``, ``push_to``, ``push_peak``, ``push_impulse`` (the planned
+    #: ∫F_n dt, N s), ``predicted_heading_error`` (empty without)
     plans: List[Dict[str, Any]]
     trajectory: Optional[_F64]
     """(steps, 26) per control step when recorded; columns: ``trajectory_columns()``."""

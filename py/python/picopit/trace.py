@@ -93,12 +93,14 @@ class Trace:
                 f"seed {self.result.get('seed')}, {len(self.columns['time'])} steps")
 
     def plan_lines(self) -> List[str]:
-        """One line per plan of the upper layer: when, the mode, the planned push's window and
-        peak normal force, the predicted heading error at the end of the look-ahead."""
+        """One line per plan of the upper layer: when, the mode (for an abort, why), the side,
+        the planned push's window, peak normal force and impulse, the predicted heading error
+        at the end of the look-ahead."""
         out = []
         for p in self.result.get("plans") or []:
             window = ("none" if p["push_from"] is None
-                      else f"{p['push_from']:.2f}-{p['push_to']:.2f} s, peak {p['push_peak']:.0f} N")
+                      else f"{p['push_from']:.2f}-{p['push_to']:.2f} s, peak {p['push_peak']:.0f} N, "
+                           f"{p['push_impulse'] / 1000:.1f} kN s")
             why = f" ({p['reason']})" if p.get("reason") else ""
             out.append(f"plan at {p['time']:5.2f} s: {p['mode']}{why}, {p.get('side', '?')} side, "
                        f"push {window}, predicted heading error "
