@@ -317,6 +317,16 @@ impl Snapshots {
         view: DriverView,
     ) -> (Outcome, bool) {
         let pt = &self.params.target;
+        if settings.bullet_beside && !self.bullet_fits(snap, side, settings.contact_back) {
+            // No bullet can push from here: the shove fails as the bullet would, over the edge.
+            return (
+                Outcome::Failure {
+                    cause: FailureCause::BoundaryViolation,
+                    time: snap.time(),
+                },
+                false,
+            );
+        }
         let mut run = snap.clone();
         match view {
             DriverView::True => {}
@@ -325,17 +335,6 @@ impl Snapshots {
                 let t = run.time();
                 run.held = Some(run.driver.command(t, None, &x, &run.road));
             }
-        }
-        if settings.bullet_beside && !self.bullet_fits(&run, side, settings.contact_back) {
-            // No bullet can push from here: the shove fails as the bullet would, over the edge.
-            let time = run.time();
-            return (
-                Outcome::Failure {
-                    cause: FailureCause::BoundaryViolation,
-                    time,
-                },
-                false,
-            );
         }
         run.shove(side, dv, pt.lr, pt.width, settings.contact_back);
         let outcome = loop {
