@@ -350,6 +350,31 @@ impl PitController {
             replanned = true;
             plan_time = self.clock.now() - tp;
         }
+        // The closed loop of the push: between replans, let go as soon as the target left
+        // alone would reverse inside the road.
+        if upper
+            && !replanned
+            && self.phases.phase() == Phase::Pit
+            && self.phases.contacted()
+            && self.planner.package().mode == Mode::Pit
+        {
+            let pin = PlannerInput {
+                time: input.time,
+                target: input.target,
+                bullet: input.bullet,
+                target_input: input.target_input,
+                road: input.road,
+                obstacles: input.obstacles,
+                side: Some(self.planner.package().side),
+                best_effort: true,
+            };
+            if self
+                .planner
+                .push_done(&pin, self.settings.phases.release_heading_tol)?
+            {
+                self.phases.stabilise(input.time);
+            }
+        }
         let phase = self.phases.phase();
         let mut mpc_status = None;
         let command = if phase.is_active() {

@@ -374,6 +374,11 @@ pub struct PhaseSettings {
     /// into a spinning target is what ends in unsafe rebounds; docs/RESULTS.md). Above π it
     /// never applies.
     pub let_go_turn: f64,
+    /// The closed loop of the push: in contact, the bullet lets go the first control step
+    /// the target left alone would meet the planner's terminal set with its projected
+    /// heading within this of the reversed heading (rad; the planner's `heading_tol` bounds
+    /// it as well).
+    pub release_heading_tol: f64,
     /// The target counts as settled below this speed (m/s) and yaw rate (rad/s).
     pub settle_speed: f64,
     pub settle_yaw_rate: f64,
@@ -404,6 +409,7 @@ impl Default for PhaseSettings {
             release_dwell: 0.15,
             pit_yaw_done: 1.05,
             let_go_turn: 0.35,
+            release_heading_tol: 0.6,
             settle_speed: 0.5,
             settle_yaw_rate: 0.1,
             bullet_yaw_rate_max: 1.5,
@@ -445,6 +451,7 @@ impl PhaseSettings {
             ("phases.monitor_speed", self.monitor_speed),
             ("phases.bullet_clearance_min", self.bullet_clearance_min),
             ("phases.let_go_turn", self.let_go_turn),
+            ("phases.release_heading_tol", self.release_heading_tol),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(name, format!("must be finite and >= 0 (got {v})")));

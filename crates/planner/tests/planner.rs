@@ -598,3 +598,43 @@ fn on_a_curve_the_push_comes_from_the_inside() {
     assert_eq!(side_for(None, -3.5), Side::Right);
     assert_eq!(side_for(None, 3.5), Side::Left);
 }
+
+/// The closed loop of the push: `push_done` says whether the target, left alone now, would
+/// reach the reversed heading inside the road. A target sliding on at 8 m/s with its body
+/// turned 90° does if it still spins at 1.5 rad/s, not without a spin (it stays across the
+/// road) nor spinning at 4 rad/s (it turns on past the reversed heading); the tolerance
+/// binds, and the package is left as it was.
+#[test]
+fn a_push_is_done_once_the_target_left_alone_reverses() {
+    let road = road();
+    let mut p = planner(PlannerSettings::default());
+    let (xt0, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
+    let pkg = p.plan(&input(&road, &[], xt0, xb)).unwrap().clone();
+    let spun = |r: f64| {
+        let mut xt = xt0;
+        let (turned, v) = (std::f64::consts::FRAC_PI_2, 8.0);
+        xt[2] = turned;
+        xt[0] = v * turned.cos();
+        xt[1] = -v * turned.sin();
+        xt[3] = r;
+        let mut inp = input(&road, &[], xt, xb);
+        inp.side = Some(mpc::Side::Right);
+        inp
+    };
+    let tol = PlannerSettings::default().heading_tol;
+    assert!(p.push_done(&spun(1.5), tol).unwrap());
+    assert!(!p.push_done(&spun(0.0), tol).unwrap(), "no spin");
+    assert!(!p.push_done(&spun(4.0), tol).unwrap(), "spinning past");
+    assert!(!p.push_done(&spun(1.5), 0.0).unwrap(), "a zero tolerance");
+    assert!(
+        !p.push_done(&input(&road, &[], xt0, xb), tol).unwrap(),
+        "a target driving on"
+    );
+    assert_eq!(p.package(), &pkg);
+    let mut bad = spun(1.5);
+    bad.target[3] = f64::NAN;
+    assert_eq!(
+        p.push_done(&bad, tol).unwrap_err(),
+        planner::PlanError::NonFiniteState
+    );
+}

@@ -440,6 +440,55 @@ impl Planner {
         })
     }
 
+    /// The free prediction (no force) from `input`, judged: whether the target, left alone
+    /// now, reaches the terminal set (reversed heading, inside the road, clear of the
+    /// obstacles). Leaves `self.xs` the free prediction; the package is not touched.
+    fn free_rollout_reverses(&mut self, input: &PlannerInput<'_>, lane: f64) -> bool {
+        self.free_rollout_within(input, lane, self.settings.heading_tol)
+    }
+
+    /// As [`Self::free_rollout_reverses`] with the terminal heading within `heading_tol`.
+    fn free_rollout_within(
+        &mut self,
+        input: &PlannerInput<'_>,
+        lane: f64,
+        heading_tol: f64,
+    ) -> bool {
+        let side = input.side.unwrap_or_else(|| self.bullet_side(input));
+        self.setup_candidate(side, self.n, lane);
+        self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
+        self.rollout(Some(input.road), &input.target, false, false);
+        self.inside = self.inside_side(input);
+        self.linearise_rows(input.road, input.obstacles);
+        let (_, heading_error, road_margin, clearance, stop_margin) = self.merit(false);
+        heading_error <= heading_tol
+            && self.acceptable(heading_error, [road_margin, stop_margin], clearance)
+    }
+
+    /// Whether the push under way has done its work: the target, left alone from now,
+    /// reaches the terminal set (the test the plan begins with). The closed loop of the push:
+    /// the controller asks it every step in contact and lets go the first time it holds,
+    /// instead of pushing on to the next replan. The package is not touched.
+    ///
+    /// # Errors
+    /// [`PlanError`] for bad input (a non-finite state, too many obstacles).
+    pub fn push_done(
+        &mut self,
+        input: &PlannerInput<'_>,
+        heading_tol: f64,
+    ) -> Result<bool, PlanError> {
+        if input.target.iter().any(|v| !v.is_finite())
+            || input.target_input.iter().any(|v| !v.is_finite())
+        {
+            return Err(PlanError::NonFiniteState);
+        }
+        if input.obstacles.len() > MAX_OBSTACLES {
+            return Err(PlanError::TooManyObstacles);
+        }
+        let lane = self.begin(input);
+        Ok(self.free_rollout_within(input, lane, heading_tol))
+    }
+
     /// Plan from the current state: search the candidates and fill the package.
     ///
     /// # Errors
@@ -459,14 +508,7 @@ impl Planner {
         // work, or a target spinning out by itself): the decision is to stop pushing. The
         // package still reports the predicted margins.
         let free_failure = {
-            let side = input.side.unwrap_or_else(|| self.bullet_side(input));
-            self.setup_candidate(side, self.n, lane);
-            self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
-            self.rollout(Some(input.road), &input.target, false, false);
-            self.inside = self.inside_side(input);
-            self.linearise_rows(input.road, input.obstacles);
-            let (_, heading_error, road_margin, clearance, stop_margin) = self.merit(false);
-            if self.acceptable(heading_error, [road_margin, stop_margin], clearance) {
+            if self.free_rollout_reverses(input, lane) {
                 self.package.candidates = 0;
                 self.package.feasible_candidates = 0;
                 self.fill_package(Mode::Stabilise, None, None, lane, input);
