@@ -573,6 +573,10 @@ mod tests {
             ("[planner.weights]\npenalty = 0.0", "weights.penalty"),
             ("[phases]\nrelease_gap = 0.01", "phases.release_gap"),
             ("[phases]\nlet_go_turn = -0.1", "phases.let_go_turn"),
+            (
+                "[phases]\nrelease_heading_tol = -0.1",
+                "phases.release_heading_tol",
+            ),
             ("[planner]\ndt = 0.1", "planner.dt"),
             ("[mpc]\nhorizon = 1", "horizon"),
         ];
