@@ -29,6 +29,23 @@ pub struct ControllerInput<'a> {
     pub obstacles: &'a [Obstacle],
 }
 
+impl<'a> ControllerInput<'a> {
+    /// The upper layer's view of this step: on `side` if committed, with the planner's best
+    /// effort (in contact) or not.
+    fn planner_input(&self, side: Option<Side>, best_effort: bool) -> PlannerInput<'a> {
+        PlannerInput {
+            time: self.time,
+            target: self.target,
+            bullet: self.bullet,
+            target_input: self.target_input,
+            road: self.road,
+            obstacles: self.obstacles,
+            side,
+            best_effort,
+        }
+    }
+}
+
 /// What one control step decided.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ControllerOutput {
@@ -303,17 +320,9 @@ impl PitController {
             // During the PIT the side is committed: only its window and forces are replanned.
             let committed = (phase == Phase::Pit && self.planner.package().mode == Mode::Pit)
                 .then(|| self.planner.package().side);
-            let pin = PlannerInput {
-                time: input.time,
-                target: input.target,
-                bullet: input.bullet,
-                target_input: input.target_input,
-                road: input.road,
-                obstacles: input.obstacles,
-                side: committed,
-                best_effort: phase == Phase::Pit,
-            };
-            let pkg = self.planner.plan(&pin)?;
+            let pkg = self
+                .planner
+                .plan(&input.planner_input(committed, phase == Phase::Pit))?;
             if phase == Phase::Chasing && pkg.mode == Mode::Abort {
                 self.infeasible_count += 1;
                 // A lost race is not a plan that may come right later: give up at once.
@@ -358,16 +367,7 @@ impl PitController {
             && self.phases.contacted()
             && self.planner.package().mode == Mode::Pit
         {
-            let pin = PlannerInput {
-                time: input.time,
-                target: input.target,
-                bullet: input.bullet,
-                target_input: input.target_input,
-                road: input.road,
-                obstacles: input.obstacles,
-                side: Some(self.planner.package().side),
-                best_effort: true,
-            };
+            let pin = input.planner_input(Some(self.planner.package().side), true);
             if self
                 .planner
                 .push_done(&pin, self.settings.phases.release_heading_tol)?

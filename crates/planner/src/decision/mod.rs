@@ -442,8 +442,10 @@ impl Planner {
 
     /// The free prediction (no force) from `input`, judged: whether the target, left alone
     /// now, reaches the terminal set (reversed heading, inside the road, clear of the
-    /// obstacles). Leaves `self.xs` the free prediction; the package is not touched.
+    /// obstacles). Leaves `self.xs` the free prediction and `self.inside` the side inside
+    /// the curve ahead; the package is not touched.
     fn free_rollout_reverses(&mut self, input: &PlannerInput<'_>, lane: f64) -> bool {
+        self.inside = self.inside_side(input);
         self.free_rollout_within(input, lane, self.settings.heading_tol)
     }
 
@@ -458,7 +460,6 @@ impl Planner {
         self.setup_candidate(side, self.n, lane);
         self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
         self.rollout(Some(input.road), &input.target, false, false);
-        self.inside = self.inside_side(input);
         self.linearise_rows(input.road, input.obstacles);
         let (_, heading_error, road_margin, clearance, stop_margin) = self.merit(false);
         heading_error <= heading_tol
@@ -477,14 +478,7 @@ impl Planner {
         input: &PlannerInput<'_>,
         heading_tol: f64,
     ) -> Result<bool, PlanError> {
-        if input.target.iter().any(|v| !v.is_finite())
-            || input.target_input.iter().any(|v| !v.is_finite())
-        {
-            return Err(PlanError::NonFiniteState);
-        }
-        if input.obstacles.len() > MAX_OBSTACLES {
-            return Err(PlanError::TooManyObstacles);
-        }
+        check_input(input)?;
         let lane = self.begin(input);
         Ok(self.free_rollout_within(input, lane, heading_tol))
     }
@@ -494,15 +488,7 @@ impl Planner {
     /// # Errors
     /// [`PlanError`] for bad input (a non-finite state, too many obstacles).
     pub fn plan(&mut self, input: &PlannerInput<'_>) -> Result<&DecisionPackage, PlanError> {
-        if input.target.iter().any(|v| !v.is_finite())
-            || input.bullet.iter().any(|v| !v.is_finite())
-            || input.target_input.iter().any(|v| !v.is_finite())
-        {
-            return Err(PlanError::NonFiniteState);
-        }
-        if input.obstacles.len() > MAX_OBSTACLES {
-            return Err(PlanError::TooManyObstacles);
-        }
+        check_input(input)?;
         let lane = self.begin(input);
         // The target reverses without further push (a PIT under way that has done its
         // work, or a target spinning out by itself): the decision is to stop pushing. The
@@ -693,6 +679,20 @@ impl Planner {
             -1.0
         }
     }
+}
+
+/// The input a plan needs: finite states and driver command, at most `MAX_OBSTACLES`.
+fn check_input(input: &PlannerInput<'_>) -> Result<(), PlanError> {
+    if input.target.iter().any(|v| !v.is_finite())
+        || input.bullet.iter().any(|v| !v.is_finite())
+        || input.target_input.iter().any(|v| !v.is_finite())
+    {
+        return Err(PlanError::NonFiniteState);
+    }
+    if input.obstacles.len() > MAX_OBSTACLES {
+        return Err(PlanError::TooManyObstacles);
+    }
+    Ok(())
 }
 
 /// |wrap(ψ_N + τ r_N − ψ_rev)|.
