@@ -147,6 +147,32 @@ def test_trace_matches_the_episode_the_benchmark_runs():
     assert np.allclose(back[:, 0], c["target_x"], atol=1e-6) and np.allclose(back[:, 1], c["target_y"], atol=1e-6)
 
 
+def test_trace_sets_each_plan_against_what_the_target_then_did():
+    """Every plan's prediction starts from the target state the controller measured when it
+    planned (the recorded sample at the plan's time), and its line says how far the target
+    was from the prediction at the prediction's last recorded step."""
+    t = trace.trace(trace.find_scene(TEXTBOOK, "sc-00002"), "4dof")
+    c = t.columns
+    plans = t.result["plans"]
+    assert len(plans) >= 3
+    checked = 0
+    for p in plans:
+        times, states = np.asarray(p["predicted_time"]), np.asarray(p["predicted_target"])
+        assert states.shape == (times.size, 8) and times[0] == pytest.approx(p["time"])
+        i = int(np.argmin(np.abs(c["time"] - p["time"])))
+        if abs(c["time"][i] - p["time"]) < 1e-9:
+            measured = [c[k][i] for k in ("target_vx", "target_vy", "target_psi", "target_r",
+                                          "target_p", "target_phi", "target_x", "target_y")]
+            assert np.allclose(states[0], measured, atol=1e-9), p["time"]
+            checked += 1
+        err = t.prediction_error(p)
+        assert err is not None and err["distance"] >= 0.0 and abs(err["heading"]) <= np.pi
+        assert times[0] < err["time"] <= c["time"][-1] + 1e-9
+    assert checked >= len(plans) - 1, "only the plan before the first sample is unrecorded"
+    lines = t.plan_lines()
+    assert len(lines) == len(plans) and all(" off the prediction" in l for l in lines), lines
+
+
 def test_trace_runs_a_half_scale_trial_case_with_its_controller_settings(capsys):
     """The half-scale trials in process: the trial file, its controller settings TOML."""
     rc = cli.main(["trace", "R1", "--scenarios", str(TRIALS), "--every", "100",

@@ -5,7 +5,7 @@ use ::sim::episode::{
     phase_name, run_episode as core_run, EpisodeConfig, EpisodeError as CoreError, Sample,
 };
 use ::sim::scenario::Scenario;
-use numpy::{PyArray1, ToPyArray};
+use numpy::{PyArray1, PyArrayMethods, ToPyArray};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -64,7 +64,8 @@ fn trajectory_columns() -> Vec<String> {
 /// `record` the result holds the trajectory (one row per control step) and the upper
 /// layer's plans (`plans`: `time`, `mode`, `reason` (why an abort: the race lost or the
 /// infeasibility, else None), `side`, `push_from`, `push_to`, `push_peak`, `push_impulse` (∫F_n dt, N s),
-/// `predicted_heading_error`; empty without `record`). The GIL is
+/// `predicted_heading_error`, `predicted_time` and `predicted_target` (the plan's step times
+/// and predicted target states); empty without `record`). The GIL is
 /// released while the episode runs.
 #[pyfunction]
 #[pyo3(signature = (scenario, config, seed = 0, record = false, models_dir = None))]
@@ -166,6 +167,14 @@ fn run_episode<'py>(
             pushed.iter().map(|s| s.2[0] * dt).sum::<f64>(),
         )?;
         plan.set_item("predicted_heading_error", p.predicted_heading_error)?;
+        // The whole prediction: step start times and the predicted target states.
+        let times: Vec<f64> = p.predicted.iter().map(|s| s.0).collect();
+        let states: Vec<f64> = p.predicted.iter().flat_map(|s| s.1).collect();
+        plan.set_item("predicted_time", PyArray1::from_vec(py, times))?;
+        plan.set_item(
+            "predicted_target",
+            PyArray1::from_vec(py, states).reshape([p.predicted.len(), 8])?,
+        )?;
         plans.append(plan)?;
     }
     d.set_item("plans", plans)?;

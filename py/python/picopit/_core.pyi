@@ -646,7 +646,8 @@ class EpisodeResult(TypedDict):
     #: with ``record``, the upper layer's plans: ``time``, ``mode``, ``reason`` (why an
     #: abort: ``"race lost"`` or the infeasibility; else None), ``side`` (``"left"`` or
     #: ``"right"``), ``push_from``, ``push_to``, ``push_peak``, ``push_impulse`` (the planned
-    #: ∫F_n dt, N s), ``predicted_heading_error`` (empty without)
+    #: ∫F_n dt, N s), ``predicted_heading_error``, ``predicted_time`` ((N+1,) step start
+    #: times, s) and ``predicted_target`` ((N+1, 8) the predicted target states) (empty without)
     plans: List[Dict[str, Any]]
     trajectory: Optional[_F64]
     """(steps, 26) per control step when recorded; columns: ``trajectory_columns()``."""

@@ -115,7 +115,8 @@ def _trace_parser(sub) -> None:
     p.add_argument("--every", type=int, default=2, metavar="N", help="show every N-th step (default 2)")
     p.add_argument("--plans", action="store_true",
                    help="also list the upper layer's plans (mode and, for an abort, why; side; planned push: window, "
-                        "peak force, impulse; predicted heading error)")
+                        "peak force, impulse; predicted heading error; how far the target then was from the "
+                        "prediction, in metres and degrees, at the prediction's last recorded step)")
     p.add_argument("--csv", metavar="PATH", help="write every step, with the road-frame columns, as CSV")
     p.add_argument("--plot", metavar="PNG", help="draw the episode (paths, yaw, speed, command, contact)")
     p.set_defaults(func=_cmd_trace)

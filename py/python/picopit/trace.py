@@ -92,19 +92,48 @@ class Trace:
                 f"driver {(s.get('driver') or {}).get('kind')}, {s.get('params')}; config {self.config}, "
                 f"seed {self.result.get('seed')}, {len(self.columns['time'])} steps")
 
+    def prediction_error(self, plan: Mapping[str, Any]) -> Optional[Dict[str, float]]:
+        """How far the target went from the plan's prediction: at the last predicted step the
+        episode reached, the distance (m) between the predicted and the recorded target
+        positions and the predicted minus the recorded heading (rad, wrapped); None for a
+        plan without a prediction or whose steps the recording does not hold."""
+        times = np.asarray(plan.get("predicted_time", ()))
+        states = np.asarray(plan.get("predicted_target", ()))
+        t = self.columns["time"]
+        if times.size == 0 or t.size == 0:
+            return None
+        k = int(np.searchsorted(times, t[-1] + 1e-9)) - 1
+        if k < 0:
+            return None
+        i = int(np.argmin(np.abs(t - times[k])))
+        step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        if abs(t[i] - times[k]) > 0.5 * step + 1e-9:
+            return None
+        x = states[k]
+        return {
+            "time": float(times[k]),
+            "distance": math.hypot(x[6] - self.columns["target_x"][i], x[7] - self.columns["target_y"][i]),
+            "heading": _core.wrap_angle(float(x[2] - self.columns["target_psi"][i])),
+        }
+
     def plan_lines(self) -> List[str]:
         """One line per plan of the upper layer: when, the mode (for an abort, why), the side,
         the planned push's window, peak normal force and impulse, the predicted heading error
-        at the end of the look-ahead."""
+        at the end of the look-ahead, and how far the target then was from the prediction
+        (:meth:`prediction_error`)."""
         out = []
         for p in self.result.get("plans") or []:
             window = ("none" if p["push_from"] is None
                       else f"{p['push_from']:.2f}-{p['push_to']:.2f} s, peak {p['push_peak']:.0f} N, "
                            f"{p['push_impulse'] / 1000:.1f} kN s")
             why = f" ({p['reason']})" if p.get("reason") else ""
+            err = self.prediction_error(p)
+            truth = ("" if err is None else
+                     f"; at {err['time']:.2f} s the target was {err['distance']:.2f} m and "
+                     f"{math.degrees(err['heading']):+.0f} deg off the prediction")
             out.append(f"plan at {p['time']:5.2f} s: {p['mode']}{why}, {p.get('side', '?')} side, "
                        f"push {window}, predicted heading error "
-                       f"{p['predicted_heading_error']:.3f} rad")
+                       f"{p['predicted_heading_error']:.3f} rad{truth}")
         return out
 
     def metrics(self) -> str:
