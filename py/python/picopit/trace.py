@@ -96,14 +96,14 @@ class Trace:
         """How far the target went from the plan's prediction: at the last predicted step the
         episode reached, the distance (m) between the predicted and the recorded target
         positions and the predicted minus the recorded heading (rad, wrapped); None for a
-        plan without a prediction or whose steps the recording does not hold."""
+        plan without a prediction, or none of whose later steps the recording holds."""
         times = np.asarray(plan.get("predicted_time", ()))
         states = np.asarray(plan.get("predicted_target", ()))
         t = self.columns["time"]
         if times.size == 0 or t.size == 0:
             return None
         k = int(np.searchsorted(times, t[-1] + 1e-9)) - 1
-        if k < 0:
+        if k < 1:  # nothing predicted beyond the plan's own time is recorded
             return None
         i = int(np.argmin(np.abs(t - times[k])))
         step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
