@@ -5,7 +5,7 @@ use ::sim::episode::{
     phase_name, run_episode as core_run, EpisodeConfig, EpisodeError as CoreError, Sample,
 };
 use ::sim::scenario::Scenario;
-use numpy::{PyArray1, PyArrayMethods, ToPyArray};
+use numpy::{PyArray1, ToPyArray};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -171,10 +171,7 @@ fn run_episode<'py>(
         let times: Vec<f64> = p.predicted.iter().map(|s| s.0).collect();
         let states: Vec<f64> = p.predicted.iter().flat_map(|s| s.1).collect();
         plan.set_item("predicted_time", PyArray1::from_vec(py, times))?;
-        plan.set_item(
-            "predicted_target",
-            PyArray1::from_vec(py, states).reshape([p.predicted.len(), 8])?,
-        )?;
+        plan.set_item("predicted_target", crate::planner::rows_out(py, states, 8)?)?;
         plans.append(plan)?;
     }
     d.set_item("plans", plans)?;

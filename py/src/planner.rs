@@ -244,7 +244,7 @@ impl StateArgs {
 }
 
 /// A flat float vector as an (n, cols) array.
-fn rows_out<'py>(
+pub(crate) fn rows_out<'py>(
     py: Python<'py>,
     flat: Vec<f64>,
     cols: usize,
