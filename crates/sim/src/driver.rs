@@ -25,7 +25,8 @@ pub enum Trigger {
 /// * `brake`: from its onset brakes with `fraction` of the maximum brake torque (still
 ///   steering for the lane before the first contact, hands off after it);
 /// * `counter_steer`: from `delay` after the first contact steers against the yaw rate,
-///   `δ = −gain · r`, clamped to `max_steer`.
+///   `δ = −gain · r · σ(v_x)`, clamped to `max_steer` ([`counter_steer`]: σ turns the steer
+///   round when the car rolls backwards, where the front wheels turn it the other way).
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum DriverDef {
@@ -233,10 +234,29 @@ impl TargetDriver {
                 steer_gain,
                 max_steer,
             } => match since_contact {
-                Some(dt) if dt >= delay => ((-steer_gain * x[3]).clamp(-max_steer, max_steer), 0.0),
+                Some(dt) if dt >= delay => (counter_steer(steer_gain, max_steer, x), 0.0),
                 Some(_) => (0.0, 0.0),
                 None => (self.lane_keep(offset, gain, x, road), drive),
             },
         }
     }
+}
+
+/// Below this body-frame speed (m/s) the counter-steer fades out and turns round with the
+/// direction of travel ([`counter_steer`]).
+pub const COUNTER_STEER_REVERSE_BLEND: f64 = 0.5;
+
+/// The counter-steering driver's wheel angle: against the yaw rate `r`,
+/// `δ = clamp(−gain · r · σ(v_x), ±max_steer)` with `σ = clamp(v_x / 0.5 m/s, −1, 1)`.
+///
+/// A steered front axle yaws a car rolling forwards towards the steer and one rolling
+/// backwards away from it (the front wheels' slip angle `δ − (v_y + l_f r)/v_x` changes the
+/// sign of the `δ` term's moment with `v_x`). A driver who steers to stop the rotation
+/// therefore steers the other way once the spin has turned the car past 90° to its path;
+/// the bare law `−gain · r` would steer into the spin there and keep it going. Near a
+/// standstill the steer fades out.
+#[must_use]
+pub fn counter_steer(gain: f64, max_steer: f64, x: &TargetState) -> f64 {
+    let sigma = (x[0] / COUNTER_STEER_REVERSE_BLEND).clamp(-1.0, 1.0);
+    (-gain * x[3] * sigma).clamp(-max_steer, max_steer)
 }

@@ -269,3 +269,66 @@ fn before_the_contact_every_driver_holds_its_speed() {
         }
     }
 }
+
+/// The counter-steering driver slows the yaw whichever way the car rolls: over 1.5 s from a
+/// yaw rate of 0.4 rad/s at 8 m/s it turns the car less than a driver off the controls, rolling
+/// forwards and rolling backwards (after a spin). The bare law `δ = −gain · r`, without the
+/// turn with the direction of travel, steers a car rolling backwards into its spin.
+#[test]
+fn a_counter_steering_driver_slows_the_yaw_rolling_forwards_and_backwards() {
+    use dynamics::plant::{Plant, PlantConfig, VehicleInit};
+    let mut v = common::straight();
+    v["driver"] = json!({"kind": "counter_steer", "offset": 0.0, "gain": 1.0, "delay": 0.3,
+                         "steer_gain": 0.4, "max_steer": 0.3});
+    let sc = Scenario::from_json_line(&v.to_string(), 1).unwrap();
+    let params = sc.params.load().unwrap();
+    let road = sc.build_road().unwrap();
+    let (_, ti) = sc.initial_states(&road);
+    // The yaw turned in 1.5 s from `vx`, r = 0.4 rad/s, with the steer law `law` (None: the
+    // driver's own) and no pedals.
+    let turned = |vx: f64, law: Option<fn(f64) -> f64>| -> f64 {
+        let mut plant = Plant::new(
+            &params,
+            PlantConfig {
+                mu: sc.mu,
+                ..PlantConfig::default()
+            },
+        )
+        .unwrap();
+        plant.reset(
+            &VehicleInit {
+                x: -1e5,
+                ..VehicleInit::default()
+            },
+            &VehicleInit { vx, r: 0.4, ..ti },
+        );
+        let mut driver = sc.target_driver(&params);
+        let psi0 = plant.target_state()[2];
+        for k in 0..30 {
+            let x = plant.target_state();
+            let (own, tb) = driver.command(1.0 + k as f64 * 0.05, Some(0.0), &x, &road);
+            assert!(
+                tb.abs() < 1e-12,
+                "a counter-steering driver leaves the pedals"
+            );
+            let steer = law.map_or(own, |f| f(x[3]));
+            plant.set_target_command(steer, 0.0);
+            plant.advance(0.05);
+        }
+        (plant.target_state()[2] - psi0).abs()
+    };
+    let hands_off: fn(f64) -> f64 = |_| 0.0;
+    let bare: fn(f64) -> f64 = |r| (-0.4 * r).clamp(-0.3, 0.3);
+    for vx in [8.0, -8.0] {
+        let (cs, off) = (turned(vx, None), turned(vx, Some(hands_off)));
+        assert!(
+            cs < 0.9 * off,
+            "vx {vx}: counter-steer turned {cs:.3} rad, hands off {off:.3} rad"
+        );
+    }
+    let (bare_back, off_back) = (turned(-8.0, Some(bare)), turned(-8.0, Some(hands_off)));
+    assert!(
+        bare_back > off_back,
+        "rolling backwards the bare law turned {bare_back:.3} rad, hands off {off_back:.3} rad"
+    );
+}
