@@ -121,6 +121,12 @@ pub struct VehicleParams {
     /// Service brake: total brake torque at the wheels (N m) and front share.
     pub brake_torque_max: f64,
     pub brake_bias_front: f64,
+    /// Anti-lock brakes: the longitudinal wheel slip `|κ|` the ABS holds a braked wheel at
+    /// (about its tyre's force peak) above [`crate::plant::ABS_MIN_SPEED`]; 0 (the default)
+    /// for brakes without ABS, which lock a wheel once its brake torque exceeds what the
+    /// tyre can take.
+    #[serde(default)]
+    pub abs_slip: f64,
     /// Rolling-resistance coefficient f_r (rolling-resistance torque f_r F_z R_w per wheel).
     pub rolling_resistance: f64,
     /// Aerodynamic drag area C_d A (m²); drag ½ ρ C_d A v².
@@ -378,6 +384,7 @@ impl VehicleParams {
             drive_torque_max: NonNegative, drive_torque_min: Finite,
             torque_time_constant: NonNegative, brake_torque_max: NonNegative,
             brake_bias_front: Fraction, rolling_resistance: NonNegative, drag_area: NonNegative,
+            abs_slip: NonNegative,
         });
         // Every road vehicle from a 1:5 scale model (~10 kg) to a heavy truck (~40 t).
         let inertia = (1e-2, 1e6, "kg m^2");
@@ -402,7 +409,7 @@ impl VehicleParams {
             steer_time_constant: lag, drive_torque_max: torque,
             drive_torque_min: (-1e5, 0.0, "N m"), torque_time_constant: lag,
             brake_torque_max: torque, rolling_resistance: (0.0, 0.1, ""),
-            drag_area: (0.0, 20.0, "m^2"),
+            drag_area: (0.0, 20.0, "m^2"), abs_slip: (0.0, 0.5, ""),
         });
         let invalid = |field: &str, value: f64, reason: &'static str| {
             Err(ParamError::Invalid {

@@ -715,3 +715,66 @@ fn a_contact_the_step_cannot_resolve_is_refused_and_the_stiffest_accepted_one_is
     );
     assert!((p.total_momentum() - m0).norm() / m0.norm() <= 1e-6);
 }
+
+/// The bullet's ABS (`abs_slip`, full size 0.15): braking at its full service-brake torque
+/// from 20 m/s on dry asphalt, no wheel locks while the car rolls
+/// faster than `ABS_MIN_SPEED`, the car keeps its heading (a yaw disturbance of 0.05 rad/s
+/// dies out) and slows at more than 0.85 μ g once the brakes are on.
+/// The same car without ABS locks its rear wheels (its brake bias, 0.66 front, over-brakes the
+/// unloaded rear axle above ~0.8 μ g) and turns away.
+#[test]
+fn the_bullets_abs_keeps_its_wheels_turning_and_its_heading_under_full_braking() {
+    let mu = 0.9;
+    let run = |abs_slip: f64| -> (f64, bool, f64) {
+        let mut params = full();
+        params.bullet.abs_slip = abs_slip;
+        let mut p = Plant::new(
+            &params,
+            PlantConfig {
+                mu,
+                ..PlantConfig::default()
+            },
+        )
+        .unwrap();
+        p.reset(
+            &VehicleInit {
+                vx: 20.0,
+                r: 0.05,
+                ..Default::default()
+            },
+            &VehicleInit {
+                x: 1e4,
+                ..Default::default()
+            },
+        );
+        p.set_bullet_command(0.0, 0.0);
+        p.set_brake(Which::Bullet, params.bullet.brake_torque_max);
+        let mut locked = false;
+        // The mean deceleration from 0.3 s (the brake's lag) to 1.5 s.
+        p.advance(0.3);
+        let v0 = p.bullet_state()[3];
+        for _ in 0..12 {
+            p.advance(0.1);
+            locked |= p.body(Which::Bullet).omega.contains(&0.0);
+        }
+        let decel = (v0 - p.bullet_state()[3]) / 1.2;
+        assert!(p.bullet_state()[3] > dynamics::plant::ABS_MIN_SPEED + 1.0);
+        (p.bullet_state()[2].abs(), locked, decel)
+    };
+    let (yaw, locked, decel) = run(0.15);
+    assert!(!locked, "with ABS no wheel locks");
+    assert!(
+        yaw < 3f64.to_radians(),
+        "with ABS it keeps its heading: {yaw} rad"
+    );
+    assert!(
+        decel > 0.85 * mu * GRAVITY,
+        "with ABS it slows at {decel} m/s²"
+    );
+    let (yaw_off, locked_off, _) = run(0.0);
+    assert!(locked_off, "without ABS a wheel locks");
+    assert!(
+        yaw_off > 3.0 * yaw,
+        "without ABS it turns away: {yaw_off} against {yaw} rad"
+    );
+}

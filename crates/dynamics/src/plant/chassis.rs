@@ -42,6 +42,8 @@ pub(super) struct Chassis {
     pub(super) torque_limits: (f64, f64),
     pub(super) torque_lag: f64,
     pub(super) brake_max: f64,
+    /// [`VehicleParams::abs_slip`] (0: no ABS).
+    pub(super) abs_slip: f64,
     pub(super) rolling_resistance: f64,
     pub(super) drag: f64,
     pub(super) length: f64,
@@ -152,6 +154,7 @@ impl Chassis {
             torque_limits: (p.drive_torque_min, p.drive_torque_max),
             torque_lag: lag_factor(dt, p.torque_time_constant),
             brake_max: p.brake_torque_max,
+            abs_slip: p.abs_slip,
             rolling_resistance: p.rolling_resistance,
             drag: 0.5 * AIR_DENSITY * p.drag_area,
             length: p.length,

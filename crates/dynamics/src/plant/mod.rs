@@ -54,6 +54,10 @@ use nalgebra::SVector;
 /// Air density at 20 °C, sea level (kg/m³).
 pub const AIR_DENSITY: f64 = 1.204;
 
+/// Wheel ground speed (m/s) below which an ABS ([`crate::params::VehicleParams::abs_slip`])
+/// lets the brakes lock (production systems switch off at walking pace, 5–10 km/h).
+pub const ABS_MIN_SPEED: f64 = 2.0;
+
 /// What the target's gearbox has engaged.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]

@@ -4,7 +4,7 @@
 
 use super::chassis::Chassis;
 use super::contact::External;
-use super::{Plant, VehicleBody};
+use super::{Plant, VehicleBody, ABS_MIN_SPEED};
 use crate::geometry::{cross, Vec2};
 use crate::tyre::{combined_slip4, tan_slip, V_LOW};
 use crate::GRAVITY;
@@ -181,10 +181,23 @@ fn integrate_vehicle(c: &Chassis, b: &mut VehicleBody, ext: &External, dt: f64, 
         let omega_free = b.omega[w] + dt * (drive - c.rw * fx_wheel[w] + ground) / i_eff;
         let coulomb = c.brake_share[w] * b.brake + c.rolling_resistance * fz[w] * c.rw + hold;
         let cap = dt * coulomb / i_eff;
-        b.omega[w] = if omega_free.abs() <= cap {
+        let braked = if omega_free.abs() <= cap {
             0.0
         } else {
             omega_free - cap.copysign(omega_free)
+        };
+        // ABS: the brake may slow the wheel to the slip it holds, not below (it releases
+        // the pressure there), while the wheel rolls fast enough for the system to act.
+        let v_x = v_wheel_new[w].x;
+        b.omega[w] = if c.abs_slip > 0.0 && b.brake > 0.0 && v_x.abs() > ABS_MIN_SPEED {
+            let floor = (1.0 - c.abs_slip) * v_x / c.rw;
+            if v_x > 0.0 {
+                braked.max(omega_free.min(floor))
+            } else {
+                braked.min(omega_free.max(floor))
+            }
+        } else {
+            braked
         };
     }
 
