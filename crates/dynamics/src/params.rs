@@ -719,6 +719,12 @@ mod tests {
                 Some("brake_bias_front = 1.5"),
                 "target.brake_bias_front",
             ),
+            (
+                "bullet",
+                "abs_slip",
+                Some("abs_slip = 0.9"),
+                "bullet.abs_slip = 0.9: outside the physical range",
+            ),
         ];
         for (table, key, line, expect) in cases {
             let text = replace_line(src, table, key, line);
