@@ -171,26 +171,11 @@ fn initial_states_follow_the_road() {
 
 #[test]
 fn a_lane_keeping_target_stays_in_its_lane_on_the_curve() {
-    use dynamics::plant::{Plant, PlantConfig, VehicleInit};
     let sc = Scenario::from_json_line(&common::curved().to_string(), 1).unwrap();
     let params = sc.params.load().unwrap();
     let road = sc.build_road().unwrap();
-    let mut plant = Plant::new(
-        &params,
-        PlantConfig {
-            mu: sc.mu,
-            ..PlantConfig::default()
-        },
-    )
-    .unwrap();
     let (_, ti) = sc.initial_states(&road);
-    plant.reset(
-        &VehicleInit {
-            x: -1e5,
-            ..VehicleInit::default()
-        },
-        &ti,
-    );
+    let mut plant = common::target_alone(&sc, &params, &ti);
     let mut driver = sc.target_driver(&params);
     let mut worst: f64 = 0.0;
     for k in 0..200 {
@@ -211,7 +196,6 @@ fn a_lane_keeping_target_stays_in_its_lane_on_the_curve() {
 /// on the straight road), within ±0.5 m/s over 5 s, and lets go of it after the contact.
 #[test]
 fn before_the_contact_every_driver_holds_its_speed() {
-    use dynamics::plant::{Plant, PlantConfig, VehicleInit};
     for (road_kind, base) in [
         ("curved", common::curved()),
         ("straight", common::straight()),
@@ -227,22 +211,8 @@ fn before_the_contact_every_driver_holds_its_speed() {
             let sc = Scenario::from_json_line(&v.to_string(), 1).unwrap();
             let params = sc.params.load().unwrap();
             let road = sc.build_road().unwrap();
-            let mut plant = Plant::new(
-                &params,
-                PlantConfig {
-                    mu: sc.mu,
-                    ..PlantConfig::default()
-                },
-            )
-            .unwrap();
             let (_, ti) = sc.initial_states(&road);
-            plant.reset(
-                &VehicleInit {
-                    x: -1e5,
-                    ..VehicleInit::default()
-                },
-                &ti,
-            );
+            let mut plant = common::target_alone(&sc, &params, &ti);
             let mut d = sc.target_driver(&params);
             let mut worst: f64 = 0.0;
             for k in 0..100 {
@@ -276,7 +246,7 @@ fn before_the_contact_every_driver_holds_its_speed() {
 /// turn with the direction of travel, steers a car rolling backwards into its spin.
 #[test]
 fn a_counter_steering_driver_slows_the_yaw_rolling_forwards_and_backwards() {
-    use dynamics::plant::{Plant, PlantConfig, VehicleInit};
+    use dynamics::plant::VehicleInit;
     let mut v = common::straight();
     v["driver"] = json!({"kind": "counter_steer", "offset": 0.0, "gain": 1.0, "delay": 0.3,
                          "steer_gain": 0.4, "max_steer": 0.3});
@@ -287,21 +257,7 @@ fn a_counter_steering_driver_slows_the_yaw_rolling_forwards_and_backwards() {
     // The yaw turned in 1.5 s from `vx`, r = 0.4 rad/s, with the steer law `law` (None: the
     // driver's own) and no pedals.
     let turned = |vx: f64, law: Option<fn(f64) -> f64>| -> f64 {
-        let mut plant = Plant::new(
-            &params,
-            PlantConfig {
-                mu: sc.mu,
-                ..PlantConfig::default()
-            },
-        )
-        .unwrap();
-        plant.reset(
-            &VehicleInit {
-                x: -1e5,
-                ..VehicleInit::default()
-            },
-            &VehicleInit { vx, r: 0.4, ..ti },
-        );
+        let mut plant = common::target_alone(&sc, &params, &VehicleInit { vx, r: 0.4, ..ti });
         let mut driver = sc.target_driver(&params);
         let psi0 = plant.target_state()[2];
         for k in 0..30 {

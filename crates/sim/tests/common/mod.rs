@@ -1,6 +1,8 @@
 //! A valid scenario to start tests from.
 #![allow(dead_code)]
 
+use dynamics::params::ParamSet;
+use dynamics::plant::{Plant, PlantConfig, VehicleInit};
 use serde_json::{json, Value};
 use sim::scenario::{Scenario, ScenarioError};
 
@@ -52,4 +54,25 @@ pub fn straight() -> Value {
     v["bullet"]["d"] = json!(3.5);
     v["driver"] = json!({"kind": "lane_keep", "offset": 0.0, "gain": 1.0});
     v
+}
+
+/// A plant on the scenario's μ with the target at `target` and the bullet parked far away:
+/// the target alone, as its driver tests drive it.
+pub fn target_alone(sc: &Scenario, params: &ParamSet, target: &VehicleInit) -> Plant {
+    let mut plant = Plant::new(
+        params,
+        PlantConfig {
+            mu: sc.mu,
+            ..PlantConfig::default()
+        },
+    )
+    .unwrap();
+    plant.reset(
+        &VehicleInit {
+            x: -1e5,
+            ..VehicleInit::default()
+        },
+        target,
+    );
+    plant
 }
