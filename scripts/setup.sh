@@ -48,6 +48,9 @@ fi
 export VIRTUAL_ENV="$VENV"
 export PATH="$VENV/bin:$PATH"
 export PIP_DISABLE_PIP_VERSION_CHECK=1
+# No wheel cache: the full set pulls torch with its CUDA libraries (~4 GB from PyPI); a cached
+# copy would double that on disk, and a CI machine once ran out of space installing it.
+export PIP_NO_CACHE_DIR=1
 python -m pip install --quiet 'maturin>=1.9.4,<2'
 
 # The extras: test (pytest; scipy and CommonRoad's models for the plant validation; protobuf and
