@@ -101,7 +101,7 @@ pub fn fill_reference(
     match pkg.mode {
         Mode::Pit => {
             let (t0, t1) = pkg.window;
-            let approach = Approach::new(pkg, rel, stand, time, s, behind_x, ls);
+            let approach = Approach::new(pkg, rel, stand, time, behind_x, ls);
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
                 *st = if tau < t0 - s.turn_in {
@@ -141,7 +141,7 @@ pub fn fill_reference(
             } else {
                 stand
             };
-            let mut approach = Approach::new(pkg, rel, goal, time, s, behind_x, ls);
+            let mut approach = Approach::new(pkg, rel, goal, time, behind_x, ls);
             approach.across_behind = pkg.hold_back;
             for (k, st) in r.stages.iter_mut().enumerate() {
                 let tau = time + (k + 1) as f64 * dt;
@@ -162,7 +162,7 @@ pub fn fill_reference(
 /// was, arriving at rest relative to the target at the contact station: the reference is a
 /// trajectory in time, so the MPC cannot put off braking by re-planning it from wherever
 /// the bullet has got to), across from the current relative position `rel` (at `time`) to
-/// `goal` at no more than `lateral_speed`, and kept behind `behind_x`
+/// `goal` at no more than the package's `lateral_speed`, and kept behind `behind_x`
 /// while it is more than a metre (full size; × `length_scale`) off the goal's line (so that
 /// a bullet changing lanes behind the target does not close in on its rear first), then
 /// held.
@@ -187,7 +187,6 @@ impl Approach {
         rel: Vec2,
         goal: Vec2,
         time: f64,
-        s: &PlannerSettings,
         behind_x: f64,
         length_scale: f64,
     ) -> Self {
@@ -197,7 +196,7 @@ impl Approach {
             time,
             along: pkg.approach,
             along_from: pkg.time,
-            lateral_speed: s.lateral_speed,
+            lateral_speed: pkg.lateral_speed,
             behind_x,
             length_scale,
             across_behind: false,

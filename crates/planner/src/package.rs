@@ -105,6 +105,10 @@ pub struct DecisionPackage {
     /// and speed then to the contact station (the body x of `contact_rel_pos`), at rest
     /// relative to the target there: the reference follows it until the next plan.
     pub approach: Profile,
+    /// How fast the approach moves across relative to the target (m/s): the settings'
+    /// `lateral_speed`, more while the target drifts across the bullet's line towards the
+    /// far side it crosses to.
+    pub lateral_speed: f64,
     /// T_c = [t0, t1] (absolute s); empty (t1 < t0) when no window is planned.
     pub window: (f64, f64),
     /// X_T,f and S_post.
@@ -149,6 +153,7 @@ impl DecisionPackage {
             push_speed: 0.0,
             envelope_lat: 1.0,
             approach: Profile::new(0.0, 0.0, 0.0, 1.0, 1.0),
+            lateral_speed: 1.0,
             window: (f64::INFINITY, f64::NEG_INFINITY),
             terminal: TerminalSet {
                 heading: 0.0,

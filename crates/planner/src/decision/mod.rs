@@ -540,7 +540,8 @@ impl Planner {
                 closed_sides += 1;
                 continue;
             }
-            let (t_arr, x_arr) = self.earliest_arrival(side, &input.target, &input.bullet);
+            let (t_arr, x_arr) =
+                self.earliest_arrival(side, input.road, &input.target, &input.bullet);
             if input.side.is_none()
                 && free_failure.is_some_and(|f| t_arr >= f.step as f64 * self.settings.dt)
             {

@@ -242,6 +242,8 @@ impl Planner {
         let merit = self.merit(false);
         let s = &self.settings;
         let c = self.contact_pose(self.side);
+        let lateral_speed =
+            self.crossing_speed(self.side, input.road, &input.target, &input.bullet);
         let p = &mut self.package;
         p.mode = mode;
         p.infeasible = infeasible;
@@ -262,6 +264,7 @@ impl Planner {
             s.approach_speed,
             BRAKE_MARGIN,
         );
+        p.lateral_speed = lateral_speed;
         p.window = match chosen {
             Some(o) => (
                 input.time + o.k0 as f64 * s.dt,

@@ -54,11 +54,12 @@ impl Planner {
     /// rear-quarter station, or one that will stop a little short of it, is already at a
     /// station. The time is the approach along the target ([`Profile`], from the bullet's
     /// relative position and speed, arriving at rest relative to the target), moving across
-    /// at `lateral_speed` at the same time, plus a settling time; crossing behind the target
+    /// at the crossing speed ([`Self::crossing_speed`]) at the same time, plus a settling time; crossing behind the target
     /// to the other side first drops back behind its rear bumper.
     pub(super) fn earliest_arrival(
         &self,
         side: Side,
+        road: &Road,
         xt: &TargetState,
         xb: &BulletState,
     ) -> (f64, f64) {
@@ -106,7 +107,35 @@ impl Planner {
         } else {
             Profile::new(rel.x, rel_vel.x, goal_along, a, cap).time()
         };
-        (s.settle_time + along.max(dy / s.lateral_speed), x_c)
+        let lateral = self.crossing_speed(side, road, xt, xb);
+        (s.settle_time + along.max(dy / lateral), x_c)
+    }
+
+    /// How fast (m/s) the bullet's approach moves across relative to the target towards
+    /// `side`: `lateral_speed`, plus the target's own drift across the road towards the
+    /// bullet when the bullet crosses to the far side (a target drifting out of its lane
+    /// passes in front of a bullet that holds its line: the bullet crosses behind it by
+    /// keeping its course). The drift is the relative lateral speed of a bullet running
+    /// along the road at its speed, in the target's frame.
+    pub(super) fn crossing_speed(
+        &self,
+        side: Side,
+        road: &Road,
+        xt: &TargetState,
+        xb: &BulletState,
+    ) -> f64 {
+        let s = &self.settings;
+        let rel = crate::href::relative_position(xt, xb);
+        if side.sign() * rel.y >= 0.0 {
+            return s.lateral_speed;
+        }
+        let road_heading = road.project(Vec2::new(xt[idx::X], xt[idx::Y])).heading;
+        let holding = rotate(
+            road_heading - xt[idx::PSI],
+            Vec2::new(xb[3].hypot(xb[4]), 0.0),
+        );
+        let drift = side.sign() * (holding.y - xt[idx::VY]);
+        s.lateral_speed + drift.max(0.0)
     }
 
     /// Lateral room (m) the bullet has on `side` at its stand-off pose beside the target's
@@ -131,7 +160,7 @@ impl Planner {
     /// [`chase::FALL_BACK`] after the arrival, at most [`chase::LOOK`] ahead).
     pub(super) fn stand_off_blocked(&self, side: Side, input: &PlannerInput<'_>) -> bool {
         let s = &self.settings;
-        let (t_arr, x_c) = self.earliest_arrival(side, &input.target, &input.bullet);
+        let (t_arr, x_c) = self.earliest_arrival(side, input.road, &input.target, &input.bullet);
         let horizon = (t_arr + self.w as f64 * s.dt + chase::FALL_BACK).min(chase::LOOK);
         let c = self.contact_pose_at(side, x_c);
         let path = chase::Path {
