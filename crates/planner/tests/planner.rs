@@ -638,3 +638,50 @@ fn a_push_is_done_once_the_target_left_alone_reverses() {
         planner::PlanError::NonFiniteState
     );
 }
+
+/// A bullet crossing behind the target to its far side crosses as fast as the target
+/// drifts across its line: with the target heading 5° across the road towards a bullet
+/// that holds the road's course at 17 m/s, the approach crosses at `lateral_speed` plus
+/// 17 sin 5° ≈ 1.48 m/s; towards its own side, and across from a target that keeps
+/// its course or drifts away, at `lateral_speed` alone. A chase on the inside of a curve
+/// carries the crossing speed in its package.
+#[test]
+fn a_target_drifting_across_the_bullets_line_speeds_its_crossing() {
+    use mpc::reference::Side;
+    let road = road();
+    let s = PlannerSettings::default();
+    let p = planner(s.clone());
+    // The bullet on the target's right, 8 m behind.
+    let (xt0, xb) = states(&road, -8.0, -3.5, 16.0, 17.0);
+    let crossing = |psi: f64, side: Side| {
+        let mut xt = xt0;
+        xt[2] = psi;
+        p.crossing_speed(side, &road, &xt, &xb)
+    };
+    let drift = 17.0 * 5f64.to_radians().sin();
+    // Heading 5° to the right: towards the bullet on the right.
+    let far = crossing(-5f64.to_radians(), Side::Left);
+    assert!(
+        (far - (s.lateral_speed + drift)).abs() < 1e-9,
+        "far side {far} against {}",
+        s.lateral_speed + drift
+    );
+    assert_eq!(crossing(-5f64.to_radians(), Side::Right), s.lateral_speed);
+    assert_eq!(crossing(0.0, Side::Left), s.lateral_speed);
+    assert_eq!(crossing(5f64.to_radians(), Side::Left), s.lateral_speed);
+    // A left curve ahead, the bullet on the right and the target heading 5° to the right:
+    // the chase goes to the inside (the far side), and its package crosses at the
+    // drift-assisted speed.
+    let curve = Road::curved(120.0, 150.0, 400.0, 30.0, 3, 3.5, 1.0);
+    let (mut xt, xb) = states(&curve, -8.0, -3.5, 18.0, 20.0);
+    xt[2] = -5f64.to_radians();
+    let mut q = planner(s.clone());
+    let pkg = q.plan(&input(&curve, &[], xt, xb)).unwrap().clone();
+    assert_eq!(pkg.side, Side::Left);
+    let expected = s.lateral_speed + 20.0 * 5f64.to_radians().sin();
+    assert!(
+        (pkg.lateral_speed - expected).abs() < 1e-9,
+        "{} against {expected}",
+        pkg.lateral_speed
+    );
+}

@@ -117,7 +117,7 @@ impl Planner {
     /// passes in front of a bullet that holds its line: the bullet crosses behind it by
     /// keeping its course). The drift is the relative lateral speed of a bullet running
     /// along the road at its speed, in the target's frame.
-    pub(super) fn crossing_speed(
+    pub fn crossing_speed(
         &self,
         side: Side,
         road: &Road,
