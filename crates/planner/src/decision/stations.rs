@@ -54,8 +54,9 @@ impl Planner {
     /// rear-quarter station, or one that will stop a little short of it, is already at a
     /// station. The time is the approach along the target ([`Profile`], from the bullet's
     /// relative position and speed, arriving at rest relative to the target), moving across
-    /// at the crossing speed ([`Self::crossing_speed`]) at the same time, plus a settling time; crossing behind the target
-    /// to the other side first drops back behind its rear bumper.
+    /// at the crossing speed ([`Self::crossing_speed`]) at the same time, plus a settling
+    /// time; crossing behind the target to the other side first drops back behind its rear
+    /// bumper.
     pub(super) fn earliest_arrival(
         &self,
         side: Side,
@@ -117,6 +118,7 @@ impl Planner {
     /// passes in front of a bullet that holds its line: the bullet crosses behind it by
     /// keeping its course). The drift is the relative lateral speed of a bullet running
     /// along the road at its speed, in the target's frame.
+    #[must_use]
     pub fn crossing_speed(
         &self,
         side: Side,
