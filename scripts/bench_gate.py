@@ -11,13 +11,17 @@ Reads target/criterion/<group>/<bench>/new/{estimates,sample}.json (written by
 `cargo bench`), prints every bench found (median, p99 over criterion's samples, its ratio to
 its reference, the limit) and exits 1 if a gated bench exceeds its limit or has no result.
 `--record` prints the measured ratios as the file's [gates] table instead of gating, for
-after an intended change of performance. Standard library only (plus tomli before 3.11).
+after an intended change of performance. `--failing` prints, per bench binary, a criterion
+filter for the benches that fail and their references: scripts/bench.sh re-runs those once
+before it fails (on a shared machine a neighbour's burst can slow one bench and neither
+reference), so a gate fails only when it fails twice. Standard library only (plus tomli before 3.11).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,40 +116,69 @@ def found_benches(criterion: Path) -> list[str]:
     )
 
 
-def gate(criterion: Path, margin: float, gates: dict[str, Gate]) -> int:
-    failed = False
-    print(f"{'bench':<44} {'median':>9} {'p99':>9} {'ratio':>8} {'limit':>9}  verdict")
+def judge(criterion: Path, margin: float, gates: dict[str, Gate], verbose: bool = True) -> list[str]:
+    """Print the table (if `verbose`) and return the gated benches over their limit or
+    without a result."""
+    failing: list[str] = []
+    say = print if verbose else (lambda *a, **k: None)
+    say(f"{'bench':<44} {'median':>9} {'p99':>9} {'ratio':>8} {'limit':>9}  verdict")
     for bench in sorted(set(found_benches(criterion)) | set(gates)):
         g = gates.get(bench)
         r = read(criterion, bench)
         if r is None:
-            print(f"{bench:<44} {'missing':>9}{'':>30}  FAIL (no result)")
-            failed = True
+            say(f"{bench:<44} {'missing':>9}{'':>30}  FAIL (no result)")
+            failing.append(bench)
             continue
         if g is None:
-            print(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9}")
+            say(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9}")
             continue
         if g.absolute_ns is not None:
             ok = r.median <= g.absolute_ns
-            print(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9} {'':>8} "
+            say(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9} {'':>8} "
                   f"{fmt_ns(g.absolute_ns):>9}  {'ok' if ok else 'FAIL'}")
         else:
             ref = reference(criterion, g.reference)
             if ref is None:
-                print(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9}{'':>20}  "
+                say(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9}{'':>20}  "
                       f"FAIL (no result for its reference {g.reference})")
-                failed = True
+                failing.append(bench)
                 continue
             ratio = r.median / ref.median
             limit = margin * g.ratio
             ok = ratio <= limit
-            print(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9} {ratio:>8.4g} "
+            say(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9} {ratio:>8.4g} "
                   f"{limit:>9.4g}  {'ok' if ok else 'FAIL'}")
-        failed |= not ok
-    if failed:
+        if not ok:
+            failing.append(bench)
+    return failing
+
+
+def gate(criterion: Path, margin: float, gates: dict[str, Gate]) -> int:
+    if judge(criterion, margin, gates):
         print("bench gate: FAILED (see the rows marked FAIL; benches/thresholds.toml says how the limits are set)")
         return 1
     print("bench gate: every gated bench within its limit")
+    return 0
+
+
+def binary_of(bench: str, g: Gate) -> str:
+    """The bench binary that measures a gated bench: its reference's (`reference/<binary>`),
+    or for an absolute gate its group's name."""
+    if g.reference is not None:
+        return g.reference.removeprefix("reference/")
+    return bench.split("/", 1)[0]
+
+
+def failing(criterion: Path, margin: float, gates: dict[str, Gate]) -> int:
+    """Print one line per bench binary with a failing gate: the binary and a criterion filter
+    (a regex) for those benches and the binary's two references, for a re-run."""
+    by_binary: dict[str, list[str]] = {}
+    for bench in judge(criterion, margin, gates, verbose=False):
+        binary = binary_of(bench, gates[bench])
+        by_binary.setdefault(binary, []).append(bench)
+    for binary, benches in sorted(by_binary.items()):
+        names = benches + [f"reference/{binary}", f"reference/{binary}_end"]
+        print(binary, "^(" + "|".join(re.escape(n) for n in names) + ")$")
     return 0
 
 
@@ -173,6 +206,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="criterion's output folder (default target/criterion)")
     ap.add_argument("--record", action="store_true",
                     help="print the measured ratios as a [gates] table instead of gating")
+    ap.add_argument("--failing", action="store_true",
+                    help="print, per bench binary with a failing gate, the binary and a criterion "
+                         "filter for a re-run of those benches and its references")
     args = ap.parse_args(argv)
     try:
         margin, gates = load_spec(args.spec)
@@ -181,6 +217,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.record:
         return record(args.criterion, gates)
+    if args.failing:
+        return failing(args.criterion, margin, gates)
     return gate(args.criterion, margin, gates)
 
 

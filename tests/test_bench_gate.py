@@ -109,3 +109,30 @@ def test_the_shipped_spec_gates_every_shipped_model_and_parses():
     for g in gates.values():
         if g.ratio is not None:
             assert g.reference.startswith("reference/")
+
+
+def test_failing_names_the_binary_and_a_filter_for_a_rerun(tmp_path, capsys):
+    import re
+
+    spec_path = tmp_path / "thresholds.toml"
+    spec_path.write_text(SPEC)
+    criterion = tmp_path / "criterion"
+    args = ["--spec", str(spec_path), "--criterion", str(criterion), "--failing"]
+    # Within the limits: nothing to re-run.
+    for bench, ns in {"reference/ctrl_step": 3_000, "ctrl_step/picopinn": 2.1e6,
+                      "ipc/state_to_command": 90_000}.items():
+        write_result(criterion, bench, ns)
+    assert bench_gate.main(args) == 0
+    assert capsys.readouterr().out == ""
+    # The control step 1.6x slower and the IPC over its absolute limit: one line per binary.
+    write_result(criterion, "ctrl_step/picopinn", 1.6 * 2.1e6)
+    write_result(criterion, "ipc/state_to_command", 400_000)
+    assert bench_gate.main(args) == 0
+    lines = dict(line.split(" ", 1) for line in capsys.readouterr().out.splitlines())
+    assert set(lines) == {"ctrl_step", "ipc"}
+    ctrl = re.compile(lines["ctrl_step"])
+    for name in ("ctrl_step/picopinn", "reference/ctrl_step", "reference/ctrl_step_end"):
+        assert ctrl.search(name), name
+    for name in ("ctrl_step/pinn", "reference/ctrl_step_x", "ipc/state_to_command"):
+        assert not ctrl.search(name), name
+    assert re.compile(lines["ipc"]).search("ipc/state_to_command")
