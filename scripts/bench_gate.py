@@ -135,19 +135,19 @@ def judge(criterion: Path, margin: float, gates: dict[str, Gate], verbose: bool 
         if g.absolute_ns is not None:
             ok = r.median <= g.absolute_ns
             say(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9} {'':>8} "
-                  f"{fmt_ns(g.absolute_ns):>9}  {'ok' if ok else 'FAIL'}")
+                f"{fmt_ns(g.absolute_ns):>9}  {'ok' if ok else 'FAIL'}")
         else:
             ref = reference(criterion, g.reference)
             if ref is None:
                 say(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9}{'':>20}  "
-                      f"FAIL (no result for its reference {g.reference})")
+                    f"FAIL (no result for its reference {g.reference})")
                 failing.append(bench)
                 continue
             ratio = r.median / ref.median
             limit = margin * g.ratio
             ok = ratio <= limit
             say(f"{bench:<44} {fmt_ns(r.median):>9} {fmt_ns(r.p99):>9} {ratio:>8.4g} "
-                  f"{limit:>9.4g}  {'ok' if ok else 'FAIL'}")
+                f"{limit:>9.4g}  {'ok' if ok else 'FAIL'}")
         if not ok:
             failing.append(bench)
     return failing
