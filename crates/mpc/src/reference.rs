@@ -28,6 +28,15 @@ impl Side {
             Self::Right => -1.0,
         }
     }
+
+    /// The opposite side.
+    #[must_use]
+    pub fn other(self) -> Self {
+        match self {
+            Self::Left => Self::Right,
+            Self::Right => Self::Left,
+        }
+    }
 }
 
 /// The reference at one step of the horizon.

@@ -31,6 +31,10 @@ pub enum SettingsError {
     Mpc(#[from] mpc::SettingsError),
 }
 
+/// The largest share of the road's μ g the approach's floor `approach_accel_min` may ask
+/// for ([`PlannerSettings::approach_accel`]): the rest of the grip is left for steering.
+pub const APPROACH_GRIP_MAX: f64 = 0.6;
+
 fn invalid(field: &str, problem: impl Into<String>) -> SettingsError {
     SettingsError::Invalid {
         field: field.to_owned(),
@@ -129,6 +133,10 @@ pub struct PlannerSettings {
     /// (m/s) and a settling time (s) of the earliest arrival.
     pub approach_speed: f64,
     pub approach_accel_g: f64,
+    /// The least relative acceleration of the approach (m/s²), where `approach_accel_g`
+    /// of μ g is less (low adhesion), itself no more than [`APPROACH_GRIP_MAX`] of μ g:
+    /// see [`Self::approach_accel`].
+    pub approach_accel_min: f64,
     pub lateral_speed: f64,
     pub settle_time: f64,
     /// Stand-off outside the contact line while closing in (m).
@@ -181,6 +189,7 @@ impl Default for PlannerSettings {
             push_speed: 1.0,
             approach_speed: 8.0,
             approach_accel_g: 0.25,
+            approach_accel_min: 1.5,
             lateral_speed: 1.0,
             settle_time: 0.3,
             standoff: 0.6,
@@ -218,10 +227,16 @@ impl PlannerSettings {
         toml::to_string(self).expect("settings serialise")
     }
 
-    /// The approach's relative acceleration (m/s²) on a road of adhesion `mu`.
+    /// The approach's relative acceleration (m/s²) on a road of adhesion `mu`:
+    /// `approach_accel_g · μ g`, but at least `approach_accel_min` where the grip allows it
+    /// (up to [`APPROACH_GRIP_MAX`] · μ g). On low adhesion a quarter of μ g is 0.4–1 m/s²:
+    /// the bullet then takes seconds to correct a metre off its station, swings about it,
+    /// and the window never fits the look-ahead (`picopit trace sc-00271`, μ 0.25: six
+    /// seconds to settle).
     #[must_use]
     pub fn approach_accel(&self, mu: f64) -> f64 {
-        self.approach_accel_g * mu * dynamics::GRAVITY
+        let grip = mu * dynamics::GRAVITY;
+        (self.approach_accel_g * grip).max(self.approach_accel_min.min(APPROACH_GRIP_MAX * grip))
     }
 
     /// Steps of the rollout.
@@ -270,6 +285,7 @@ impl PlannerSettings {
         }
         let w = &self.weights;
         let non_negative = [
+            ("approach_accel_min", self.approach_accel_min),
             ("friction", self.friction),
             ("force_guess_g", self.force_guess_g),
             ("contact_angle", self.contact_angle),
@@ -563,6 +579,31 @@ mod tests {
         assert_eq!(s, back);
     }
 
+    /// The approach accelerates at a quarter of μ g, but at least 1.5 m/s² where the grip
+    /// leaves room for it (at most 0.6 μ g): dry roads keep the quarter, low adhesion gets
+    /// the floor, the most slippery roads the grip's share.
+    #[test]
+    fn the_approach_accelerates_at_a_floor_the_grip_allows() {
+        let s = PlannerSettings::default();
+        let g = dynamics::GRAVITY;
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        assert!(close(s.approach_accel(0.9), 0.25 * 0.9 * g));
+        assert!(close(s.approach_accel(0.4), 1.5));
+        assert!(close(s.approach_accel(0.2), APPROACH_GRIP_MAX * 0.2 * g));
+        // Monotone in μ across the three regimes.
+        let mut last = 0.0;
+        for i in 1..=100 {
+            let a = s.approach_accel(f64::from(i) * 0.01);
+            assert!(a >= last, "μ {}: {a} < {last}", f64::from(i) * 0.01);
+            last = a;
+        }
+        let off = PlannerSettings {
+            approach_accel_min: 0.0,
+            ..PlannerSettings::default()
+        };
+        assert!(close(off.approach_accel(0.2), 0.25 * 0.2 * g));
+    }
+
     #[test]
     fn bad_values_name_their_field() {
         let cases = [
@@ -578,6 +619,7 @@ mod tests {
                 "phases.release_heading_tol",
             ),
             ("[planner]\ndt = 0.1", "planner.dt"),
+            ("[planner]\napproach_accel_min = -1.0", "approach_accel_min"),
             ("[mpc]\nhorizon = 1", "horizon"),
         ];
         for (text, field) in cases {

@@ -643,8 +643,9 @@ fn a_push_is_done_once_the_target_left_alone_reverses() {
 /// drifts across its line: with the target heading 5° across the road towards a bullet
 /// that holds the road's course at 17 m/s, the approach crosses at `lateral_speed` plus
 /// 17 sin 5° ≈ 1.48 m/s; towards its own side, and across from a target that keeps
-/// its course or drifts away, at `lateral_speed` alone. A chase on the inside of a curve
-/// carries the crossing speed in its package.
+/// its course or drifts away, at `lateral_speed` alone; never faster than the approach's
+/// `approach_speed` (a target heading 80° across the road towards the bullet). A chase on
+/// the inside of a curve carries the crossing speed in its package.
 #[test]
 fn a_target_drifting_across_the_bullets_line_speeds_its_crossing() {
     use mpc::reference::Side;
@@ -669,6 +670,8 @@ fn a_target_drifting_across_the_bullets_line_speeds_its_crossing() {
     assert_eq!(crossing(-5f64.to_radians(), Side::Right), s.lateral_speed);
     assert_eq!(crossing(0.0, Side::Left), s.lateral_speed);
     assert_eq!(crossing(5f64.to_radians(), Side::Left), s.lateral_speed);
+    assert!(s.lateral_speed + 17.0 * 80f64.to_radians().sin() > s.approach_speed);
+    assert_eq!(crossing(-80f64.to_radians(), Side::Left), s.approach_speed);
     // A left curve ahead, the bullet on the right and the target heading 5° to the right:
     // the chase goes to the inside (the far side), and its package crosses at the
     // drift-assisted speed.

@@ -373,6 +373,9 @@ pub(crate) fn reach_time(
 /// default approach speed, acceleration, lateral speed and settling time, speeds
 /// Froude-scaled to the vehicles): the time to close a longitudinal gap `gap` (m) at the
 /// relative speed `closing` (m/s) and a lateral offset `lateral` (m) to the PIT pose.
+/// The acceleration is `approach_accel_g` · μ g, without the controller's floor
+/// `approach_accel_min` (added after the dataset was generated): on low adhesion the
+/// screen is the stricter bound, and the shipped dataset regenerates unchanged.
 pub(crate) fn approach_time(
     params: &ParamSet,
     mu: f64,
@@ -386,7 +389,7 @@ pub(crate) fn approach_time(
         -gap,
         closing,
         0.0,
-        s.approach_accel(mu),
+        s.approach_accel_g * mu * GRAVITY,
         s.approach_speed * froude,
     );
     s.settle_time + along.time().max(lateral / (s.lateral_speed * froude))

@@ -117,7 +117,9 @@ impl Planner {
     /// bullet when the bullet crosses to the far side (a target drifting out of its lane
     /// passes in front of a bullet that holds its line: the bullet crosses behind it by
     /// keeping its course). The drift is the relative lateral speed of a bullet running
-    /// along the road at its speed, in the target's frame.
+    /// along the road at its speed, in the target's frame. The crossing is no faster than
+    /// the approach's relative speed cap `approach_speed` (a target heading straight across
+    /// the road would otherwise ask for the bullet's whole speed sideways).
     #[must_use]
     pub fn crossing_speed(
         &self,
@@ -137,7 +139,7 @@ impl Planner {
             Vec2::new(xb[3].hypot(xb[4]), 0.0),
         );
         let drift = side.sign() * (holding.y - xt[idx::VY]);
-        s.lateral_speed + drift.max(0.0)
+        (s.lateral_speed + drift.max(0.0)).min(s.approach_speed.max(s.lateral_speed))
     }
 
     /// Lateral room (m) the bullet has on `side` at its stand-off pose beside the target's
@@ -242,11 +244,7 @@ impl Planner {
         } else {
             Side::Right
         };
-        let other = if own == Side::Left {
-            Side::Right
-        } else {
-            Side::Left
-        };
+        let other = own.other();
         if !self.side_open(own, input) && self.side_open(other, input) {
             other
         } else {
