@@ -337,10 +337,12 @@ def test_controller_settings_files_override_the_presets_and_bad_ones_are_named(t
     (tmp_path / "bad.toml").write_text("[planner]\nwindow = -1.0\n")
     (tmp_path / "broken.toml").write_text("[planner\n")
     (tmp_path / "off.toml").write_text("upper_layer = false\n")
+    (tmp_path / "nan.toml").write_text("[planner]\napproach_accel_min = nan\n")
     for args, needle in ((["--controller-config", "bad.toml"], "--controller-config: "),
                          (["--controller-config-half-scale", "bad.toml"], "--controller-config-half-scale: "),
                          (["--controller-config", "broken.toml"], "--controller-config broken.toml: "),
                          (["--controller-config", "missing.toml"], "missing.toml: No such file"),
+                         (["--controller-config", "nan.toml"], "`planner.approach_accel_min` must be a finite number"),
                          # Each override is checked alone: the bad one is named, not the first given.
                          (["--uncertainty", '{"latency": 0.02}', "--controller-config", "bad.toml"],
                           "--controller-config: ")):

@@ -193,3 +193,11 @@ def test_trace_refuses_bad_input_naming_it(capsys, argv, words):
     rc = cli.main(["trace", "--scenarios", str(TEXTBOOK), *argv])
     err = capsys.readouterr().err
     assert rc == 2 and words in err and "Traceback" not in err, err
+
+
+def test_trace_names_a_non_finite_controller_setting(tmp_path, capsys):
+    bad = tmp_path / "nan.toml"
+    bad.write_text("[planner]\napproach_accel_min = nan\n")
+    rc = cli.main(["trace", "--scenarios", str(TEXTBOOK), "sc-00000", "--controller-config", str(bad)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "`planner.approach_accel_min` must be a finite number" in err, err

@@ -193,11 +193,31 @@ def load_controller_config(path: Optional[str], option: str) -> Optional[Dict[st
     from . import _toml  # tomllib, or tomli before Python 3.11
 
     try:
-        return _toml.loads(Path(path).read_text())
+        doc = _toml.loads(Path(path).read_text())
     except OSError as e:
         raise BenchError(f"{option} {path}: {e.strerror or e}") from None
     except ValueError as e:
         raise BenchError(f"{option} {path}: {e}") from None
+    # TOML has nan and inf, JSON (the core's configuration) has not: name the field here.
+    bad = _non_finite(doc)
+    if bad is not None:
+        raise BenchError(f"{option} {path}: `{bad}` must be a finite number")
+    return doc
+
+
+def _non_finite(doc: Mapping[str, Any], prefix: str = "") -> Optional[str]:
+    """The dotted name of the first non-finite number in a parsed TOML table, if any."""
+    for key, value in doc.items():
+        name = f"{prefix}{key}"
+        values = value if isinstance(value, list) else [value]
+        for v in values:
+            if isinstance(v, float) and not math.isfinite(v):
+                return name
+            if isinstance(v, dict):
+                inner = _non_finite(v, f"{name}.")
+                if inner is not None:
+                    return inner
+    return None
 
 
 def parse_uncertainty(text: str) -> Dict[str, Any]:

@@ -168,15 +168,14 @@ def config_text(config: str, clock: str = "simulated", controller_toml: Optional
         doc = {"preset": text}
     doc.setdefault("clock", clock)
     if controller_toml is not None:
-        from . import _toml  # tomllib, or tomli before Python 3.11
+        from .bench import BenchError, load_controller_config
 
         try:
             # The scene's settings whatever its parameter set (full size or half scale).
-            doc["controller"] = doc["controller_half_scale"] = _toml.loads(Path(controller_toml).read_text())
-        except OSError as e:
-            raise TraceError(f"--controller-config {controller_toml}: {e.strerror or e}") from None
-        except ValueError as e:
-            raise TraceError(f"--controller-config {controller_toml}: {e}") from None
+            doc["controller"] = doc["controller_half_scale"] = load_controller_config(
+                str(controller_toml), "--controller-config")
+        except BenchError as e:
+            raise TraceError(str(e)) from None
     return json.dumps(doc)
 
 
