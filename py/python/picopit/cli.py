@@ -513,6 +513,10 @@ def _main(args: argparse.Namespace) -> int:
         from ._core import EpisodeError, ScenarioError
 
         bad_input += (BenchError, EpisodeError, ScenarioError)
+    if args.command == "compare":
+        from .compare import CompareError
+
+        bad_input += (CompareError,)
     if args.command in ("oracle", "trace", "seed-scatter"):
         from .oracle import OracleError
         from .seed_scatter import SeedScatterError

@@ -1,8 +1,9 @@
 """The analysis subcommands of the ``picopit`` command line: ``oracle`` (the ideal-PIT bound
-and its tiers), ``trace`` (one episode step by step) and ``seed-scatter`` (the surrogates'
-accuracy over training seeds). Same conventions as ``cli``: bad
-input is one line and exit status 2 (``OracleError``, ``TraceError`` and the core's errors are
-bad input there), work that could not be completed exit status 1."""
+and its tiers), ``trace`` (one episode step by step), ``compare`` (two benchmark runs scene
+by scene) and ``seed-scatter`` (the surrogates' accuracy over training seeds). Same
+conventions as ``cli``: bad input is one line and exit status 2 (``OracleError``,
+``TraceError``, ``CompareError`` and the core's errors are bad input there), work that could
+not be completed exit status 1."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ DEFAULT_SCENARIOS = "data/scenarios.jsonl"
 def add_parsers(sub) -> None:
     _oracle_parser(sub)
     _trace_parser(sub)
+    _compare_parser(sub)
     _seed_scatter_parser(sub)
 
 
@@ -147,6 +149,46 @@ def _cmd_trace(args: argparse.Namespace) -> int:
 
         plot_case({"trajectory": t.trajectory}, scene, Path(args.plot), f"{scene['id']}: {args.config}")
         print(f"trace: wrote {args.plot}")
+    return 0
+
+
+def _compare_parser(sub) -> None:
+    p = sub.add_parser(
+        "compare",
+        help="two benchmark runs scene by scene: successes, scenes only one saved, exact McNemar p",
+        description=(
+            "Pair the episodes of two picopit bench runs by configuration and scene id (the "
+            "scenes both ran) and print, for every configuration both ran and pooled over them, "
+            "the successes of each run, the scenes only one of them saved and the two-sided exact "
+            "McNemar p-value of that split. Run both with --clock simulated: a wall-clock run "
+            "repeats only as far as the machine's load allows."
+        ),
+    )
+    p.add_argument("run_a", metavar="A", help="a run folder (its episodes.parquet or .csv) or an episodes file")
+    p.add_argument("run_b", metavar="B", help="the other run")
+    p.add_argument("--configs", metavar="LIST",
+                   help="comma-separated configurations (default: every one both runs ran)")
+    p.add_argument("--json", metavar="PATH", help="also write the rows as JSON here")
+    p.set_defaults(func=_cmd_compare)
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    import json
+
+    from . import compare as cmp
+
+    if args.json:
+        check_file(args.json, "--json")
+    configs = [c.strip() for c in args.configs.split(",") if c.strip()] if args.configs else None
+    if args.configs is not None and not configs:
+        raise cmp.CompareError("--configs: empty list")
+    fa, fb = cmp.episodes_file(Path(args.run_a)), cmp.episodes_file(Path(args.run_b))
+    rows = cmp.compare(cmp.read_episodes(fa), cmp.read_episodes(fb), configs)
+    print(cmp.markdown(rows, str(fa), str(fb)), end="")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"a": str(fa), "b": str(fb),
+                                               "rows": [r.as_dict() for r in rows]}, indent=1) + "\n")
+        print(f"compare: wrote {args.json}")
     return 0
 
 

@@ -1,0 +1,140 @@
+"""Two benchmark runs compared scene by scene (``picopit compare``).
+
+A change to the controller is judged by what it does to the same scenes: each run's
+``episodes.parquet`` (or ``episodes.csv``) is read, the episodes are paired by configuration
+and scene id (the scenes both runs ran), and for every configuration the table gives the
+successes of each run, the scenes only one of them saved and the two-sided exact McNemar
+p-value of that split; a pooled row sums the configurations (each pair of episodes is one
+trial). A split with p above ~0.05 is within what the scenes' luck makes of two equal
+controllers. Episodes with an ``error`` are left out of the pairing.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+
+from .bench_summary import mcnemar_exact_p
+
+#: Columns the comparison reads.
+COLUMNS = ("config", "scenario", "success")
+
+
+class CompareError(ValueError):
+    """A run that cannot be read or compared (the message names the path or column)."""
+
+
+@dataclass(frozen=True)
+class Row:
+    """One configuration (or the pooled row, ``config == "pooled"``)."""
+
+    config: str
+    scenes: int
+    success_a: int
+    success_b: int
+    only_a: int
+    only_b: int
+
+    @property
+    def mcnemar_p(self) -> float:
+        return mcnemar_exact_p(self.only_a, self.only_b)
+
+    def as_dict(self) -> Dict[str, object]:
+        return {"config": self.config, "scenes": self.scenes, "success_a": self.success_a,
+                "success_b": self.success_b, "only_a": self.only_a, "only_b": self.only_b,
+                "mcnemar_p": self.mcnemar_p}
+
+
+def episodes_file(run: Path) -> Path:
+    """The episodes file of a run folder (Parquet before CSV), or ``run`` itself if a file."""
+    if run.is_file():
+        return run
+    if run.is_dir():
+        for name in ("episodes.parquet", "episodes.csv"):
+            if (run / name).is_file():
+                return run / name
+        raise CompareError(f"{run}: no episodes.parquet or episodes.csv in this run folder")
+    raise CompareError(f"{run}: no such run folder or file")
+
+
+def _truth(v: object, path: Path, line: int) -> bool:
+    if isinstance(v, bool):
+        return v
+    s = str(v).strip().lower()
+    if s in ("true", "1"):
+        return True
+    if s in ("false", "0"):
+        return False
+    raise CompareError(f"{path}: row {line}: `success` is {v!r}, not true or false")
+
+
+def read_episodes(path: Path) -> Dict[Tuple[str, str], bool]:
+    """``{(config, scenario): success}`` of one run's episodes file."""
+    if path.suffix == ".parquet":
+        try:
+            import pyarrow.parquet as pq
+        except ImportError as e:  # pragma: no cover - pyarrow is a dependency of bench
+            raise CompareError(f"{path}: reading Parquet needs pyarrow ({e})") from e
+        try:
+            table = pq.read_table(path)
+        except Exception as e:  # noqa: BLE001 - any unreadable file is bad input here
+            raise CompareError(f"{path}: not a readable Parquet file ({e})") from e
+        names = set(table.column_names)
+        rows: List[Mapping[str, object]] = table.to_pylist()
+    else:
+        with open(path, newline="") as fh:
+            reader = csv.DictReader(fh)
+            names = set(reader.fieldnames or ())
+            rows = list(reader)
+    missing = [c for c in COLUMNS if c not in names]
+    if missing:
+        raise CompareError(f"{path}: no `{missing[0]}` column (need {', '.join(COLUMNS)})")
+    out: Dict[Tuple[str, str], bool] = {}
+    for i, r in enumerate(rows, start=1):
+        if r.get("error"):
+            continue
+        key = (str(r["config"]), str(r["scenario"]))
+        if key in out:
+            raise CompareError(f"{path}: row {i}: scene {key[1]} appears twice for {key[0]}")
+        out[key] = _truth(r["success"], path, i)
+    return out
+
+
+def compare(a: Mapping[Tuple[str, str], bool], b: Mapping[Tuple[str, str], bool],
+            configs: Optional[Sequence[str]] = None) -> List[Row]:
+    """One row per configuration both runs ran (in ``configs`` order if given), then the
+    pooled row when there is more than one."""
+    common = sorted({c for c, _ in a} & {c for c, _ in b})
+    if configs:
+        unknown = [c for c in configs if c not in common]
+        if unknown:
+            raise CompareError(f"--configs: {unknown[0]} is not in both runs (both ran: {', '.join(common) or 'none'})")
+        common = list(configs)
+    rows: List[Row] = []
+    for cfg in common:
+        scenes = sorted({s for c, s in a if c == cfg} & {s for c, s in b if c == cfg})
+        wa = [a[(cfg, s)] for s in scenes]
+        wb = [b[(cfg, s)] for s in scenes]
+        rows.append(Row(cfg, len(scenes), sum(wa), sum(wb),
+                        sum(x and not y for x, y in zip(wa, wb)), sum(y and not x for x, y in zip(wa, wb))))
+    if not rows or all(r.scenes == 0 for r in rows):
+        raise CompareError("the two runs have no configuration and scene in common")
+    if len(rows) > 1:
+        rows.append(Row("pooled", *(sum(getattr(r, f) for r in rows)
+                                    for f in ("scenes", "success_a", "success_b", "only_a", "only_b"))))
+    return rows
+
+
+def markdown(rows: Sequence[Row], name_a: str, name_b: str) -> str:
+    """The comparison as a Markdown table (A and B named above it)."""
+    lines = [f"A: {name_a}", f"B: {name_b}", "",
+             "| config | scenes | success A | success B | only A | only B | exact McNemar p |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        pa = 100.0 * r.success_a / r.scenes if r.scenes else 0.0
+        pb = 100.0 * r.success_b / r.scenes if r.scenes else 0.0
+        lines.append(f"| {r.config} | {r.scenes} | {r.success_a} ({pa:.1f} %) | {r.success_b} ({pb:.1f} %) "
+                     f"| {r.only_a} | {r.only_b} | {r.mcnemar_p:.3g} |")
+    return "\n".join(lines) + "\n"
