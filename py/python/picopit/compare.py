@@ -12,7 +12,7 @@ controllers. Episodes with an ``error`` are left out of the pairing.
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
@@ -42,9 +42,7 @@ class Row:
         return mcnemar_exact_p(self.only_a, self.only_b)
 
     def as_dict(self) -> Dict[str, object]:
-        return {"config": self.config, "scenes": self.scenes, "success_a": self.success_a,
-                "success_b": self.success_b, "only_a": self.only_a, "only_b": self.only_b,
-                "mcnemar_p": self.mcnemar_p}
+        return {**asdict(self), "mcnemar_p": self.mcnemar_p}
 
 
 def episodes_file(run: Path) -> Path:
@@ -111,7 +109,7 @@ def compare(a: Mapping[Tuple[str, str], bool], b: Mapping[Tuple[str, str], bool]
         unknown = [c for c in configs if c not in common]
         if unknown:
             raise CompareError(f"--configs: {unknown[0]} is not in both runs (both ran: {', '.join(common) or 'none'})")
-        common = list(configs)
+        common = list(dict.fromkeys(configs))  # each once, in the order given
     rows: List[Row] = []
     for cfg in common:
         scenes = sorted({s for c, s in a if c == cfg} & {s for c, s in b if c == cfg})
