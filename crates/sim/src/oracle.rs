@@ -10,8 +10,8 @@
 //! scenario is *ideally feasible* if one shove ends in success by the benchmark's own test
 //! ([`Monitor`]: reversed and at rest, or settled reversed at `T_max`; no boundary
 //! violation or obstacle hit). The bullet itself is not simulated; only a side where it
-//! fits beside the target at the contact, inside the road, is tried
-//! ([`OracleSettings::bullet_beside`]).
+//! fits beside the target at the contact, inside the road and clear of every obstacle, is
+//! tried ([`OracleSettings::bullet_beside`]).
 //!
 //! The bound is optimistic about the bullet (it is at its pose at once, and leaves nothing
 //! behind to hit) and restrictive about the push (one impulse, no sustained push or
@@ -20,6 +20,7 @@
 use crate::outcome::{FailureCause, Monitor, Observation, Outcome, Status};
 use crate::scenario::{Scenario, ScenarioError};
 use crate::screen::{reach_time, target_alone, ScreenSettings};
+use dynamics::contact::obb_signed_distance;
 use dynamics::geometry::{rotate, Obb, Pose2, Vec2};
 use dynamics::plant::{Plant, Which};
 use serde::{Deserialize, Serialize};
@@ -46,8 +47,9 @@ pub struct OracleSettings {
     pub screen: ScreenSettings,
     /// Only shoves from a side where a bullet fits: beside the target at the contact, parallel
     /// to it and flush against its side with its front at the contact point, its footprint
-    /// inside the road (the benchmark judges the bullet's footprint too). Without it a shove
-    /// may come from where no bullet can be, beyond a road edge.
+    /// inside the road and not overlapping any obstacle at that moment (the benchmark judges
+    /// the bullet's footprint too). Without it a shove may come from where no bullet can be:
+    /// beyond a road edge, or where a car stands in the lane beside the target.
     pub bullet_beside: bool,
 }
 
@@ -289,7 +291,7 @@ impl Snapshots {
 
     /// Whether a bullet beside the target of `snap` on `side` at the PIT contact (parallel to
     /// the target, flush against its side, its front at the contact point `back` behind the
-    /// rear axle) has its footprint inside the road.
+    /// rear axle) has its footprint inside the road and clear of every obstacle.
     fn bullet_fits(&self, snap: &Alone, side: f64, back: f64) -> bool {
         let (pt, pb) = (&self.params.target, &self.params.bullet);
         let b = *snap.plant.body(Which::Target);
@@ -304,7 +306,13 @@ impl Snapshots {
             pb.width,
             pb.cg_to_front,
         );
+        let t = snap.plant.time();
         snap.road.edge_distance(&fp) >= 0.0
+            && snap
+                .plant
+                .obstacles()
+                .iter()
+                .all(|o| obb_signed_distance(&fp, &o.footprint_at(t)) >= 0.0)
     }
 
     /// Shove a copy of `snap` and run it to the verdict.

@@ -164,3 +164,39 @@ fn a_shove_counts_only_from_a_side_where_a_bullet_fits_inside_the_road() {
     assert!(right.tried > 0);
     assert_eq!(right, right_free);
 }
+
+/// A post in the lane to the target's left, level with its rear quarter at the moment of
+/// the shove, leaves no room for a bullet on that side then: with the bullet's room checked
+/// the left side saves nothing, although its shoves alone (no bullet in the way; the target
+/// spins away ahead of the post) save the scene; on the right side, where a bullet fits,
+/// the check changes nothing.
+#[test]
+fn a_shove_counts_only_from_a_side_clear_of_obstacles() {
+    let mut v = common::straight();
+    // The target in the middle lane (d = 0) holds 15 m/s: at 3.5 s its c.g. is at x = 112.5
+    // m, and a bullet flush against its left side, front at the contact point, covers
+    // x ≈ 106–111 m, d ≈ 0.85–2.55 m.
+    v["obstacles"] = serde_json::json!([
+        {"role": "roadside", "body": {"x": 108.5, "y": 1.7, "heading": 0.0, "vx": 0.0,
+                                       "vy": 0.0, "length": 0.4, "width": 0.4}}
+    ]);
+    let sc = scenario(&v);
+    let side = |sides: &[f64], beside: bool| OracleSettings {
+        sides: sides.to_vec(),
+        bullet_beside: beside,
+        exhaustive: true,
+        time_step: 0.25,
+        window: Some([3.45, 3.55]),
+        ..shoves(&[1.0, 1.5, 2.0, 2.5, 3.0])
+    };
+    let left_free = ideal_pit(&sc, &side(&[1.0], false)).unwrap();
+    assert!(left_free.successes > 0, "{left_free:?}");
+    let left = ideal_pit(&sc, &side(&[1.0], true)).unwrap();
+    assert_eq!(left.tried, left_free.tried, "{left:?}");
+    assert_eq!(left.successes, 0, "{left:?}");
+    assert!(left.feasible.is_none());
+    let right_free = ideal_pit(&sc, &side(&[-1.0], false)).unwrap();
+    let right = ideal_pit(&sc, &side(&[-1.0], true)).unwrap();
+    assert!(right.tried > 0, "{right:?}");
+    assert_eq!(right, right_free);
+}

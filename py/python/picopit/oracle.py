@@ -6,7 +6,8 @@ instantaneous lateral shove of each size of the grid (a velocity change ``dv`` o
 and the plant runs on to ``T_max`` with the driver reacting. The scenario is *ideally
 feasible* when one shove ends in success by the benchmark's own test (``sim::oracle``, the
 Rust core; ``_core.ideal_pit``). A shove counts only from a side where a bullet fits beside
-the target inside the road (setting ``bullet_beside``, default true). The bound is optimistic
+the target, inside the road and clear of the obstacles (setting ``bullet_beside``, default
+true). The bound is optimistic
 about the bullet (at its pose at once) and restrictive about the push (one impulse, no
 sustained push).
 
