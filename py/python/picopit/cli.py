@@ -513,10 +513,11 @@ def _main(args: argparse.Namespace) -> int:
         from ._core import EpisodeError, ScenarioError
 
         bad_input += (BenchError, EpisodeError, ScenarioError)
-    if args.command == "compare":
+    if args.command in ("compare", "headroom"):
         from .compare import CompareError
+        from .headroom import HeadroomError
 
-        bad_input += (CompareError,)
+        bad_input += (CompareError, HeadroomError)
     if args.command in ("oracle", "trace", "seed-scatter"):
         from .oracle import OracleError
         from .seed_scatter import SeedScatterError

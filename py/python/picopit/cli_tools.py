@@ -1,8 +1,8 @@
 """The analysis subcommands of the ``picopit`` command line: ``oracle`` (the ideal-PIT bound
 and its tiers), ``trace`` (one episode step by step), ``compare`` (two benchmark runs scene
-by scene) and ``seed-scatter`` (the surrogates' accuracy over training seeds). Same
+by scene), ``headroom`` (a run against the bound) and ``seed-scatter`` (the surrogates' accuracy over training seeds). Same
 conventions as ``cli``: bad input is one line and exit status 2 (``OracleError``,
-``TraceError``, ``CompareError`` and the core's errors are bad input there), work that could
+``TraceError``, ``CompareError``, ``HeadroomError`` and the core's errors are bad input there), work that could
 not be completed exit status 1."""
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ def add_parsers(sub) -> None:
     _oracle_parser(sub)
     _trace_parser(sub)
     _compare_parser(sub)
+    _headroom_parser(sub)
     _seed_scatter_parser(sub)
 
 
@@ -166,29 +167,79 @@ def _compare_parser(sub) -> None:
     )
     p.add_argument("run_a", metavar="A", help="a run folder (its episodes.parquet or .csv) or an episodes file")
     p.add_argument("run_b", metavar="B", help="the other run")
-    p.add_argument("--configs", metavar="LIST",
-                   help="comma-separated configurations (default: every one both runs ran)")
-    p.add_argument("--json", metavar="PATH", help="also write the rows as JSON here")
+    _table_args(p, "every one both runs ran")
     p.set_defaults(func=_cmd_compare)
 
 
-def _cmd_compare(args: argparse.Namespace) -> int:
-    import json
+def _table_args(p, every: str) -> None:
+    """``--configs`` (default: ``every``) and ``--json`` of a command that prints rows."""
+    p.add_argument("--configs", metavar="LIST", help=f"comma-separated configurations (default: {every})")
+    p.add_argument("--json", metavar="PATH", help="also write the rows as JSON here")
 
+
+def _cmd_compare(args: argparse.Namespace) -> int:
     from . import compare as cmp
 
     if args.json:
         check_file(args.json, "--json")
-    configs = [c.strip() for c in args.configs.split(",") if c.strip()] if args.configs else None
-    if args.configs is not None and not configs:
-        raise cmp.CompareError("--configs: empty list")
+    configs = _configs(args.configs, cmp.CompareError)
     fa, fb = cmp.episodes_file(Path(args.run_a)), cmp.episodes_file(Path(args.run_b))
     rows = cmp.compare(cmp.read_episodes(fa), cmp.read_episodes(fb), configs)
     print(cmp.markdown(rows, str(fa), str(fb)), end="")
+    _write_rows(args.json, "compare", {"a": str(fa), "b": str(fb)}, rows)
+    return 0
+
+
+def _configs(arg, error):
+    """The configurations of a ``--configs LIST`` (None if not given); an empty list is
+    ``error``."""
+    configs = [c.strip() for c in arg.split(",") if c.strip()] if arg else None
+    if arg is not None and not configs:
+        raise error("--configs: empty list")
+    return configs
+
+
+def _write_rows(path, command: str, head: dict, rows) -> None:
+    """Write ``head`` and the rows (their ``as_dict``) as JSON to ``path``, if given."""
+    if path:
+        import json
+
+        Path(path).write_text(json.dumps({**head, "rows": [r.as_dict() for r in rows]}, indent=1) + "\n")
+        print(f"{command}: wrote {path}")
+
+
+def _headroom_parser(sub) -> None:
+    p = sub.add_parser(
+        "headroom",
+        help="a benchmark run against the ideal-PIT bound: the share of what a shove could save",
+        description=(
+            "Put a picopit oracle --json bound beside a picopit bench run: for every "
+            "configuration, how many of the scenes one shove could save it saves (overall and by "
+            "parameter set, road category, adhesion and target driver), and how many it saves "
+            "that no single shove does. Only the scenes the bound and every chosen configuration "
+            "ran are counted."
+        ),
+    )
+    p.add_argument("bound", metavar="BOUND", help="the bound (picopit oracle --json PATH)")
+    p.add_argument("run", metavar="RUN", help="a run folder (its episodes.parquet or .csv) or an episodes file")
+    _table_args(p, "every one the run ran")
+    p.add_argument("--params", metavar="SET", help="only the scenes of this parameter set (e.g. full_size)")
+    p.set_defaults(func=_cmd_headroom)
+
+
+def _cmd_headroom(args: argparse.Namespace) -> int:
+    from . import compare as cmp
+    from . import headroom as hr
+
     if args.json:
-        Path(args.json).write_text(json.dumps({"a": str(fa), "b": str(fb),
-                                               "rows": [r.as_dict() for r in rows]}, indent=1) + "\n")
-        print(f"compare: wrote {args.json}")
+        check_file(args.json, "--json")
+    configs = _configs(args.configs, hr.HeadroomError)
+    bound = hr.read_bound(Path(args.bound))
+    run = cmp.episodes_file(Path(args.run))
+    rows = hr.headroom(bound, cmp.read_episodes(run), configs, args.params)
+    print(f"bound: {args.bound}\nrun: {run}\n")
+    print(hr.markdown(rows), end="")
+    _write_rows(args.json, "headroom", {"bound": str(args.bound), "run": str(run)}, rows)
     return 0
 
 
