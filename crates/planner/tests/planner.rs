@@ -639,6 +639,38 @@ fn a_push_is_done_once_the_target_left_alone_reverses() {
     );
 }
 
+/// The release does not wait for the stopping point: a target already reversed but for
+/// 0.12 rad, rolling backwards at 15 m/s, drifts 1.8 m/s across the road. Over the
+/// look-ahead it stays inside; rolling on with only its stalled driveline to slow it, its
+/// stopping point lies beyond the edge. The plan, which judges the stopping point, finds the
+/// free motion short of the terminal set (it does not stabilise); `push_done` lets go,
+/// since pushing on would only turn the target further. Reversed square to the road, both
+/// agree.
+#[test]
+fn a_push_is_done_without_waiting_for_the_stopping_point() {
+    let road = road();
+    let reversed = |off: f64| {
+        let (mut xt, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
+        xt[2] = std::f64::consts::PI + off;
+        xt[0] = -15.0;
+        let mut inp = input(&road, &[], xt, xb);
+        inp.side = Some(mpc::Side::Right);
+        inp
+    };
+    let mut p = planner(PlannerSettings::default());
+    let tol = PlannerSettings::default().heading_tol;
+    assert!(p.push_done(&reversed(0.12), tol).unwrap());
+    let pkg = p.plan(&reversed(0.12)).unwrap();
+    assert_ne!(pkg.mode, Mode::Stabilise);
+    assert!(
+        pkg.predicted_stop_margin < 0.0,
+        "{}",
+        pkg.predicted_stop_margin
+    );
+    assert!(p.push_done(&reversed(0.0), tol).unwrap());
+    assert_eq!(p.plan(&reversed(0.0)).unwrap().mode, Mode::Stabilise);
+}
+
 /// A bullet crossing behind the target to its far side crosses as fast as the target
 /// drifts across its line: with the target heading 5° across the road towards a bullet
 /// that holds the road's course at 17 m/s, the approach crosses at `lateral_speed` plus
