@@ -345,16 +345,16 @@ fn first_in(r: &sim::EpisodeResult, phase: planner::Phase) -> Option<f64> {
         .map(|s| s.time)
 }
 
-/// Textbook scene `sc-00083` with the PicoPINN in both layers: once the push has turned
+/// Dataset scene `sc-02996` with the PicoPINN in both layers: once the push has turned
 /// the target past `let_go_turn`, an in-contact replan that finds no push meeting the
 /// reversal ends the PIT, and the target settles reversed inside the road; a bullet that
-/// presses on with that plan ends the PIT later and pushes the target over the edge.
+/// presses on with that plan ends the PIT later, and the spinning target swings back into
+/// it (an unsafe rebound).
 #[test]
 fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../data/textbook/scenarios.jsonl");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenarios.jsonl");
     let all = sim::load_jsonl(path).unwrap();
-    let sc = all.iter().find(|s| s.id == "sc-00083").unwrap();
+    let sc = all.iter().find(|s| s.id == "sc-02996").unwrap();
     let mut cfg = config("picopinn");
     cfg.record = true;
     assert!(cfg.controller.phases.let_go_turn < 0.5);
@@ -364,7 +364,7 @@ fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
     assert!(let_go.success(), "{:?}", let_go.metrics);
     assert_eq!(
         press_on.cause(),
-        Some(FailureCause::BoundaryViolation),
+        Some(FailureCause::UnsafeRebound),
         "{:?}",
         press_on.metrics
     );
