@@ -333,7 +333,11 @@ impl PitController {
                     self.phases
                         .abort(AbortReason::DecisionInfeasible(reason), input.time);
                 }
-            } else {
+            } else if pkg.mode != Mode::Chase {
+                // A plan that finds a push (or needs none) ends the count. A chase plan, whose
+                // windows do not fit the look-ahead yet, says nothing either way: a bullet
+                // swaying about its station alternates it with infeasible plans and would
+                // otherwise chase until the time runs out.
                 self.infeasible_count = 0;
             }
             if pkg.mode == Mode::Stabilise {

@@ -409,8 +409,10 @@ pub struct PhaseSettings {
     /// road gives by default, so that the bullet drops back out of the spinning target's
     /// sweep (a spun target slows at up to μ g).
     pub abort_brake: f64,
-    /// Consecutive infeasible decisions while chasing before the maneuver is aborted (the
-    /// situation often changes within a replanning period: a curve ends, the target slows).
+    /// Infeasible decisions while chasing before the maneuver is aborted (the situation
+    /// often changes within a replanning period: a curve ends, the target slows). A plan
+    /// that finds a push ends the count; a chase plan (no window fits the look-ahead yet)
+    /// neither counts nor ends it.
     pub infeasible_patience: u32,
 }
 

@@ -374,3 +374,36 @@ fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
     );
     assert!(b > a, "let go at {a} s, pressed on until {b} s");
 }
+
+/// Dataset scene `sc-01136` (straight urban road, μ 0.34, lane-keeping driver) with the
+/// PicoPINN in both layers: at its station beside the target the bullet finds no push that
+/// reverses the target inside the road. Swaying about the station, some plans find no
+/// window in the look-ahead at all (a chase plan); these do not reset the controller's
+/// patience, so it declares the decision infeasible instead of chasing until the time runs
+/// out.
+#[test]
+fn a_chase_that_finds_only_infeasible_pushes_is_given_up() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenarios.jsonl");
+    let all = sim::load_jsonl(path).unwrap();
+    let sc = all.iter().find(|s| s.id == "sc-01136").unwrap();
+    let mut cfg = config("picopinn");
+    cfg.record = true;
+    let r = run_episode(sc, &cfg, 0).unwrap();
+    assert_eq!(
+        r.cause(),
+        Some(FailureCause::DecisionInfeasible),
+        "{:?}",
+        r.metrics
+    );
+    assert_eq!(r.metrics.contacts, 0, "{:?}", r.metrics);
+    let modes: Vec<_> = r.plans.iter().map(|p| p.mode).collect();
+    assert!(
+        modes.contains(&planner::Mode::Chase) && modes.contains(&planner::Mode::Abort),
+        "{modes:?}"
+    );
+    assert!(
+        r.metrics.decided_at.is_some_and(|t| t < 9.0),
+        "{:?}",
+        r.metrics
+    );
+}
