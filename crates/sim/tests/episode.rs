@@ -345,6 +345,13 @@ fn first_in(r: &sim::EpisodeResult, phase: planner::Phase) -> Option<f64> {
         .map(|s| s.time)
 }
 
+/// The scene `id` of the shipped dataset (`data/scenarios.jsonl`).
+fn dataset_scene(id: &str) -> Scenario {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenarios.jsonl");
+    let all = sim::load_jsonl(path).unwrap();
+    all.into_iter().find(|s| s.id == id).unwrap()
+}
+
 /// Dataset scene `sc-02996` with the PicoPINN in both layers: once the push has turned
 /// the target past `let_go_turn`, an in-contact replan that finds no push meeting the
 /// reversal ends the PIT, and the target settles reversed inside the road; a bullet that
@@ -352,9 +359,7 @@ fn first_in(r: &sim::EpisodeResult, phase: planner::Phase) -> Option<f64> {
 /// it (an unsafe rebound).
 #[test]
 fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenarios.jsonl");
-    let all = sim::load_jsonl(path).unwrap();
-    let sc = all.iter().find(|s| s.id == "sc-02996").unwrap();
+    let sc = &dataset_scene("sc-02996");
     let mut cfg = config("picopinn");
     cfg.record = true;
     assert!(cfg.controller.phases.let_go_turn < 0.5);
@@ -383,9 +388,7 @@ fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
 /// out.
 #[test]
 fn a_chase_that_finds_only_infeasible_pushes_is_given_up() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenarios.jsonl");
-    let all = sim::load_jsonl(path).unwrap();
-    let sc = all.iter().find(|s| s.id == "sc-01136").unwrap();
+    let sc = &dataset_scene("sc-01136");
     let mut cfg = config("picopinn");
     cfg.record = true;
     let r = run_episode(sc, &cfg, 0).unwrap();
