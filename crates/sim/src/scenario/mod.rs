@@ -16,11 +16,16 @@ pub use crate::driver::{
 };
 use dynamics::params::ParamSet;
 use dynamics::plant::VehicleInit;
-use dynamics::road::{Obstacle, Road, RoadSpec, SegmentSpec};
+use dynamics::road::{Obstacle, Road};
 use dynamics::TargetState;
 use serde::{Deserialize, Serialize};
-use std::path::Path;
 use thiserror::Error;
+
+mod jsonl;
+mod road;
+
+pub use jsonl::{load_jsonl, parse_jsonl};
+pub use road::RoadDef;
 
 /// Adhesion band boundaries: `low` below 0.4 (snow, ice, gravel), `mid` from 0.4 to below
 /// 0.7 (wet asphalt), `high` from 0.7 (dry asphalt).
@@ -181,164 +186,6 @@ impl ParamSetName {
     }
 }
 
-/// The road: a cross-section and a reference line, either straight (`radius` absent) or a
-/// curve: straight `entry`, clothoid `transition` from 0 to `1/radius`, arc, the mirror
-/// clothoid, straight `entry` again; `length` is the total (m).
-#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct RoadDef {
-    /// Number of lanes (1–8), numbered from the right.
-    pub lanes: u32,
-    /// Lane width (m).
-    pub lane_width: f64,
-    /// Paved shoulder beyond the outer lanes, each side (m).
-    pub shoulder: f64,
-    /// Total length of the reference line (m).
-    pub length: f64,
-    /// Signed radius of the arc (m, positive turns left); absent for a straight road.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub radius: Option<f64>,
-    /// Straight before and after the curve (m); curved roads only.
-    #[serde(default)]
-    pub entry: f64,
-    /// Clothoid length into and out of the arc (m); curved roads only.
-    #[serde(default)]
-    pub transition: f64,
-}
-
-impl RoadDef {
-    /// Half width of the carriageway including shoulders (m).
-    #[must_use]
-    pub fn half_width(&self) -> f64 {
-        0.5 * f64::from(self.lanes) * self.lane_width + self.shoulder
-    }
-
-    /// The arc's length (m) of a curved road.
-    #[must_use]
-    pub fn arc_length(&self) -> f64 {
-        self.length - 2.0 * self.entry - 2.0 * self.transition
-    }
-
-    /// The reference line as a [`RoadSpec`] (not validated).
-    #[must_use]
-    pub fn spec(&self) -> RoadSpec {
-        let mut segments = Vec::with_capacity(5);
-        match self.radius {
-            None => segments.push(SegmentSpec::Straight {
-                length: self.length,
-            }),
-            Some(radius) => {
-                let k = 1.0 / radius;
-                if self.entry > 0.0 {
-                    segments.push(SegmentSpec::Straight { length: self.entry });
-                }
-                if self.transition > 0.0 {
-                    segments.push(SegmentSpec::Clothoid {
-                        length: self.transition,
-                        curvature_start: 0.0,
-                        curvature_end: k,
-                    });
-                }
-                segments.push(SegmentSpec::Arc {
-                    length: self.arc_length(),
-                    curvature: k,
-                });
-                if self.transition > 0.0 {
-                    segments.push(SegmentSpec::Clothoid {
-                        length: self.transition,
-                        curvature_start: k,
-                        curvature_end: 0.0,
-                    });
-                }
-                if self.entry > 0.0 {
-                    segments.push(SegmentSpec::Straight { length: self.entry });
-                }
-            }
-        }
-        RoadSpec {
-            segments,
-            lanes: self.lanes,
-            lane_width: self.lane_width,
-            shoulder: self.shoulder,
-            origin: [0.0, 0.0, 0.0],
-        }
-    }
-
-    /// Build the road.
-    ///
-    /// # Errors
-    /// [`ScenarioError::Field`] (on line 0: use [`ScenarioError::at_line`]) naming the bad
-    /// road field.
-    pub fn build(&self) -> Result<Road, ScenarioError> {
-        self.check(0)?;
-        Road::new(self.spec()).map_err(|e| ScenarioError::field(0, "road", e.to_string()))
-    }
-
-    fn check(&self, line: usize) -> Result<(), ScenarioError> {
-        let f = |name: &str| format!("road.{name}");
-        if !(1..=8).contains(&self.lanes) {
-            return Err(ScenarioError::field(
-                line,
-                f("lanes"),
-                format!("{}: must lie in 1..=8", self.lanes),
-            ));
-        }
-        range(line, &f("lane_width"), self.lane_width, 0.5, 6.0)?;
-        range(line, &f("shoulder"), self.shoulder, 0.0, 10.0)?;
-        range(line, &f("length"), self.length, 10.0, 20_000.0)?;
-        range(line, &f("entry"), self.entry, 0.0, 20_000.0)?;
-        range(line, &f("transition"), self.transition, 0.0, 20_000.0)?;
-        match self.radius {
-            None => {
-                if self.entry != 0.0 || self.transition != 0.0 {
-                    return Err(ScenarioError::field(
-                        line,
-                        f("entry"),
-                        "entry and transition belong to a curve: give a radius or set them to 0",
-                    ));
-                }
-            }
-            Some(r) => {
-                finite(line, &f("radius"), r)?;
-                let hw = self.half_width();
-                if r.abs() < (2.0 * hw).max(10.0) {
-                    return Err(ScenarioError::field(
-                        line,
-                        f("radius"),
-                        format!(
-                            "{r}: |radius| must be at least max(10 m, the road's width {:.2} m)",
-                            2.0 * hw
-                        ),
-                    ));
-                }
-                let arc = self.arc_length();
-                if arc <= 0.0 {
-                    return Err(ScenarioError::field(
-                        line,
-                        f("length"),
-                        format!(
-                            "{}: must exceed 2·entry + 2·transition (the arc would be {arc} m)",
-                            self.length
-                        ),
-                    ));
-                }
-                let turn = (arc + self.transition) / r.abs();
-                if turn > std::f64::consts::PI + 1e-9 {
-                    return Err(ScenarioError::field(
-                        line,
-                        f("(length, entry, transition, radius)"),
-                        format!(
-                            "({}, {}, {}, {r}): the curve turns {turn:.3} rad; at most π",
-                            self.length, self.entry, self.transition
-                        ),
-                    ));
-                }
-            }
-        }
-        Ok(())
-    }
-}
-
 /// A vehicle's initial state in the road's Frenet frame (of its c.g.).
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -430,46 +277,6 @@ pub struct Scenario {
 }
 
 impl Scenario {
-    /// Parse and validate one JSON line; errors are reported on line `line`.
-    ///
-    /// # Errors
-    /// [`ScenarioError::Syntax`] if the text is not JSON, [`ScenarioError::Field`] naming the
-    /// field otherwise.
-    pub fn from_json_line(text: &str, line: usize) -> Result<Self, ScenarioError> {
-        // A key named twice (JSON readers keep the last silently) is refused by name.
-        let mut keys = serde_json::Deserializer::from_str(text);
-        if let Err(e) =
-            serde_path_to_error::deserialize::<_, crate::unique_keys::UniqueKeys>(&mut keys)
-        {
-            let message = strip_position(&e.inner().to_string());
-            if message.starts_with(crate::unique_keys::DUPLICATE) {
-                return Err(ScenarioError::Field {
-                    line,
-                    field: field_of(&e.path().to_string(), &message),
-                    message: "named twice in its object (a scenario says each thing once)"
-                        .to_owned(),
-                });
-            }
-        }
-        let value: serde_json::Value =
-            serde_json::from_str(text).map_err(|e| ScenarioError::Syntax {
-                line,
-                column: e.column(),
-                message: strip_position(&e.to_string()),
-            })?;
-        let scenario: Self = serde_path_to_error::deserialize(value).map_err(|e| {
-            let path = e.path().to_string();
-            let message = e.inner().to_string();
-            ScenarioError::Field {
-                line,
-                field: field_of(&path, &message),
-                message,
-            }
-        })?;
-        scenario.validate(line)?;
-        Ok(scenario)
-    }
-
     /// One JSON line (no trailing newline); round-trips through [`Scenario::from_json_line`].
     ///
     /// # Panics
@@ -680,53 +487,7 @@ impl Scenario {
     }
 }
 
-/// Read and validate a JSON-lines file of scenarios. Blank lines are skipped; ids must be
-/// unique.
-///
-/// # Errors
-/// [`ScenarioError::Io`] if the file cannot be read, [`ScenarioError::Empty`] if it holds
-/// no scenario, otherwise the first bad line's error (line number and field).
-pub fn load_jsonl(path: impl AsRef<Path>) -> Result<Vec<Scenario>, ScenarioError> {
-    let path = path.as_ref();
-    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Io {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    })?;
-    let out = parse_jsonl(&text)?;
-    if out.is_empty() {
-        return Err(ScenarioError::Empty {
-            path: path.display().to_string(),
-        });
-    }
-    Ok(out)
-}
-
-/// Parse JSON-lines text (as [`load_jsonl`], without the empty-file check).
-///
-/// # Errors
-/// The first bad line's error.
-pub fn parse_jsonl(text: &str) -> Result<Vec<Scenario>, ScenarioError> {
-    let mut out = Vec::new();
-    let mut seen = std::collections::HashMap::new();
-    for (i, raw) in text.lines().enumerate() {
-        let line = i + 1;
-        if raw.trim().is_empty() {
-            continue;
-        }
-        let sc = Scenario::from_json_line(raw, line)?;
-        if let Some(&first) = seen.get(&sc.id) {
-            return Err(ScenarioError::DuplicateId {
-                line,
-                id: sc.id,
-                first,
-            });
-        }
-        seen.insert(sc.id.clone(), line);
-        out.push(sc);
-    }
-    Ok(out)
-}
-
+/// A finite value, else an error naming the line and the field.
 pub(crate) fn finite(line: usize, field: &str, v: f64) -> Result<(), ScenarioError> {
     if v.is_finite() {
         Ok(())
@@ -739,6 +500,7 @@ pub(crate) fn finite(line: usize, field: &str, v: f64) -> Result<(), ScenarioErr
     }
 }
 
+/// A finite value in `[lo, hi]`, else an error naming the line and the field.
 pub(crate) fn range(
     line: usize,
     field: &str,
@@ -757,59 +519,9 @@ pub(crate) fn range(
     Ok(())
 }
 
-/// serde_json appends " at line L column C"; the line is always 1 within one record.
-fn strip_position(msg: &str) -> String {
-    match msg.rfind(" at line ") {
-        Some(i) => msg[..i].to_owned(),
-        None => msg.to_owned(),
-    }
-}
-
-/// The field a deserialisation error is about: the path, extended by the name in a
-/// "missing field `x`" / "unknown field `x`" message (whose path is the parent object).
-fn field_of(path: &str, message: &str) -> String {
-    let parent = if path == "." { "" } else { path };
-    for prefix in [
-        "missing field `",
-        "unknown field `",
-        crate::unique_keys::DUPLICATE,
-    ] {
-        if let Some(rest) = message.strip_prefix(prefix) {
-            if let Some(end) = rest.find('`') {
-                let name = &rest[..end];
-                // serde_path_to_error already puts an unknown field on the path.
-                if parent == name || parent.ends_with(&format!(".{name}")) {
-                    return parent.to_owned();
-                }
-                return if parent.is_empty() {
-                    name.to_owned()
-                } else {
-                    format!("{parent}.{name}")
-                };
-            }
-        }
-    }
-    if parent.is_empty() {
-        "(record)".to_owned()
-    } else {
-        parent.to_owned()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn field_of_extends_missing_and_unknown() {
-        assert_eq!(field_of(".", "missing field `mu`"), "mu");
-        assert_eq!(field_of("road", "missing field `lanes`"), "road.lanes");
-        assert_eq!(
-            field_of("target.z", "unknown field `z`, expected one of `s`"),
-            "target.z"
-        );
-        assert_eq!(field_of("road.lanes", "invalid type: string"), "road.lanes");
-    }
 
     #[test]
     fn adhesion_bands() {
