@@ -31,14 +31,9 @@ impl Planner {
         start: usize,
         forces: &[Vec2],
     ) -> Result<Judgement, PlanError> {
-        if input.target.iter().any(|v| !v.is_finite())
-            || input.target_input.iter().any(|v| !v.is_finite())
-            || forces.iter().any(|f| !f.x.is_finite() || !f.y.is_finite())
-        {
+        check_input(input)?;
+        if forces.iter().any(|f| !f.x.is_finite() || !f.y.is_finite()) {
             return Err(PlanError::NonFiniteState);
-        }
-        if input.obstacles.len() > MAX_OBSTACLES {
-            return Err(PlanError::TooManyObstacles);
         }
         if forces.len() > self.w || start + self.w > self.n {
             return Err(PlanError::TooManyForces);
