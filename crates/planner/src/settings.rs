@@ -100,8 +100,6 @@ pub struct PlannerSettings {
     pub window: f64,
     /// Window starts tried after the earliest arrival (s, ≥ 0, ascending).
     pub start_offsets: Vec<f64>,
-    /// Sides tried: both by default.
-    pub try_both_sides: bool,
     /// Contact points tried along the target's side (m, body x relative to the rear-quarter
     /// point 0.3 m behind the rear axle; negative is further back), on the best side and
     /// window.
@@ -174,7 +172,6 @@ impl Default for PlannerSettings {
             replan_period_pit: 0.25,
             window: 0.8,
             start_offsets: vec![0.0, 0.3],
-            try_both_sides: true,
             contact_offsets: vec![0.0, -0.4],
             scp_iterations: 3,
             row_stride: 2,

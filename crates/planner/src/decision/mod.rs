@@ -425,12 +425,10 @@ impl Planner {
         let sides: &[Side] = match input.side {
             Some(Side::Left) => &[Side::Left],
             Some(Side::Right) => &[Side::Right],
-            None if self.settings.try_both_sides => &[Side::Left, Side::Right],
-            // Only the side the bullet is on.
-            None => match self.bullet_side(input) {
-                Side::Left => &[Side::Left],
-                Side::Right => &[Side::Right],
-            },
+            // Both sides; in practice the far side's windows seldom fit the look-ahead (the
+            // bullet would have to cross behind the target first), so the chase, which
+            // brings the bullet to one side, decides the side (docs/planner.md).
+            None => &[Side::Left, Side::Right],
         };
         // Where the vehicles touch, if they do: the contact point of a plan in contact.
         let pair = self.pair(&input.target, &input.bullet);
