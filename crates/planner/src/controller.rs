@@ -136,7 +136,8 @@ impl PitController {
         let mpc = CoupledMpc::new(params, mu, mpc_model, settings.mpc.clone())?;
         Ok(Self {
             reference: Reference::new(settings.mpc.horizon),
-            phases: PhaseMachine::new(settings.phases.clone()),
+            phases: PhaseMachine::new(settings.phases.clone())
+                .pushing_round(settings.planner.push_round),
             default_pit: DefaultPit::new(params, Side::Left),
             params: params.clone(),
             mu,
@@ -347,6 +348,7 @@ impl PitController {
             // terminal set ends it: the planner's best effort would keep pressing on a
             // spinning target (`PhaseSettings::let_go_turn`).
             if phase == Phase::Pit
+                && !self.settings.planner.push_round
                 && pkg.mode == Mode::Pit
                 && pkg.infeasible.is_some()
                 && self.phases.contacted()
@@ -364,9 +366,11 @@ impl PitController {
             plan_time = self.clock.now() - tp;
         }
         // The closed loop of the push: between replans, let go as soon as the target left
-        // alone would reverse inside the road.
+        // alone would reverse inside the road (a push that turns the target round goes on to
+        // `pit_yaw_done`).
         if upper
             && !replanned
+            && !self.settings.planner.push_round
             && self.phases.phase() == Phase::Pit
             && self.phases.contacted()
             && self.planner.package().mode == Mode::Pit

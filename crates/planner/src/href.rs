@@ -49,7 +49,8 @@ pub struct Timing {
 ///   window T_c with the planned force corridor C_F, then fall back behind and outside.
 ///   Over the window the contact pose is fixed in the target's frame at the start of the
 ///   push (`pit_frame`, its heading then; `None` takes the plan's heading at the window's
-///   start).
+///   start), relative to the target's c.g. or, with `push_round`, to its rear-quarter
+///   contact point (which turns with the target: the bullet keeps pushing the tail round).
 ///   The target objective tracks the planned heading at the end of the MPC's horizon
 ///   (the virtual rollout's prediction), so the MPC pushes as much as the plan needs.
 /// * Chase (and abort, while the controller's patience lasts): close in to the stand-off
@@ -111,14 +112,20 @@ pub fn fill_reference(
                     // The contact pose is held in the target's frame as it was when the
                     // push began (`pit_frame`): the bullet follows the target's c.g. but
                     // not its rotation, so it keeps its heading and pushes on while the
-                    // rear quarter swings away, as a driver does in a PIT. Stage k refers
+                    // rear quarter swings away, as a driver does in a PIT (`push_round`: it
+                    // follows the rear quarter instead and pushes it round). Stage k refers
                     // the pose to the target's heading predicted by the plan.
                     let psi0 = pit_frame.unwrap_or_else(|| pkg.heading_at(t0).unwrap_or(psi_now));
                     let psi_tau = psi_now + pkg.heading_at(tau).unwrap_or(0.0)
                         - pkg.heading_at(time).unwrap_or(0.0);
-                    let rel_world = rotate(psi0, contact.rel_pos);
+                    let anchor = if s.push_round {
+                        pkg.contact_point
+                    } else {
+                        Vec2::zeros()
+                    };
+                    let rel_world = rotate(psi0, contact.rel_pos - anchor);
                     StageReference {
-                        rel_pos: rotate(-psi_tau, rel_world),
+                        rel_pos: anchor + rotate(-psi_tau, rel_world),
                         rel_heading: psi0 + contact.rel_heading - psi_tau,
                         fn_lo: if tau >= t0 { lo } else { 0.0 },
                         fn_hi: hi,

@@ -70,6 +70,7 @@ pub struct PhaseMachine {
     contacted: bool,
     apart_since: Option<f64>,
     abort: Option<AbortReason>,
+    push_round: bool,
 }
 
 impl PhaseMachine {
@@ -82,7 +83,17 @@ impl PhaseMachine {
             contacted: false,
             apart_since: None,
             abort: None,
+            push_round: false,
         }
+    }
+
+    /// A push that turns the target round by itself (`PlannerSettings::push_round`): the
+    /// PIT phase then ends only on its timeout (or as the controller decides on the turn),
+    /// not when the bullet and the target come apart or the window is over.
+    #[must_use]
+    pub fn pushing_round(mut self, on: bool) -> Self {
+        self.push_round = on;
+        self
     }
 
     /// Start over in chasing at `time`.
@@ -184,7 +195,8 @@ impl PhaseMachine {
                 let released = self
                     .apart_since
                     .is_some_and(|t| o.time - t >= s.release_dwell - 1e-9);
-                if released || (window_over && o.gap > s.contact_gap) || in_phase > s.pit_timeout {
+                let apart = released || (window_over && o.gap > s.contact_gap);
+                if (apart && !self.push_round) || in_phase > s.pit_timeout {
                     self.enter(Phase::Stabilising, o.time);
                 }
             }
@@ -242,6 +254,31 @@ mod tests {
         assert!(m.update(&o));
         assert_eq!(m.phase(), Phase::Done);
         assert_eq!(m.abort_reason(), None);
+    }
+
+    /// A push that turns the target round goes on when the bullet and the target come
+    /// apart and past the window's end (window 1.0–1.6 s); only its timeout ends it.
+    #[test]
+    fn a_push_round_ends_on_its_timeout_only() {
+        let s = PhaseSettings::default();
+        let mut m = PhaseMachine::new(s.clone()).pushing_round(true);
+        m.reset(0.0);
+        assert!(m.update(&obs(1.0, 0.0)));
+        assert_eq!(m.phase(), Phase::Pit);
+        for k in 1..=30 {
+            let t = 1.0 + 0.05 * f64::from(k);
+            assert!(!m.update(&obs(t, 0.8)), "apart at {t} s");
+        }
+        assert_eq!(m.phase(), Phase::Pit);
+        assert!(m.update(&obs(1.05 + s.pit_timeout, 0.8)));
+        assert_eq!(m.phase(), Phase::Stabilising);
+        // The same push without it ends once the bullet has been apart for the dwell.
+        let mut m = PhaseMachine::new(s.clone());
+        m.reset(0.0);
+        m.update(&obs(1.0, 0.0));
+        m.update(&obs(1.1, 0.8));
+        assert!(m.update(&obs(1.1 + s.release_dwell, 0.8)));
+        assert_eq!(m.phase(), Phase::Stabilising);
     }
 
     #[test]

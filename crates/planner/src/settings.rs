@@ -144,6 +144,19 @@ pub struct PlannerSettings {
     /// Terminal set X_T,f: the projected heading `ψ_N + τ r_N` within `heading_tol` of the
     /// reversed heading (the yaw goes on after the look-ahead; τ is its decay time).
     pub heading_tol: f64,
+    /// The push turns the target round by itself: a slow target (the half-scale platform
+    /// at 2 m/s) yaws only while it is pushed, and stops turning the moment it is let go.
+    /// Over the window the contact pose is then held at the target's rear-quarter point,
+    /// turning with the target (the bullet's heading still held in the push-start frame, as
+    /// [`crate::href::fill_reference`] says), so that the bullet keeps pushing the tail round
+    /// instead of the target's side; and the push goes on until the target has turned
+    /// `phases.pit_yaw_done` (or `phases.pit_timeout` runs out). No prediction of the free
+    /// motion ends it (the planner's "reverses by itself", the closed loop's release,
+    /// `phases.let_go_turn`), nor a lost contact or the window's end.
+    /// Off at full size, where the target's own momentum completes the spin after a short
+    /// push: there the rear-quarter pose saved 185 of the 961 even-numbered full-size scenes
+    /// against 458 (`docs/planner.md`, "Half scale").
+    pub push_round: bool,
     pub yaw_decay: f64,
     /// Deceleration of the spun target for the post-PIT stopping point while its tyres slide
     /// sideways (fraction of μ g; rolling along its body it slows only by its rolling
@@ -192,6 +205,7 @@ impl Default for PlannerSettings {
             standoff: 0.6,
             turn_in: 0.4,
             heading_tol: 0.6,
+            push_round: false,
             yaw_decay: 0.4,
             stop_decel_fraction: 0.7,
             road_margin: 0.0,

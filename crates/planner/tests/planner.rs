@@ -3,6 +3,7 @@
 //! deterministic.
 
 use dynamics::bullet::BulletState;
+use dynamics::geometry::Vec2;
 use dynamics::params::ParamSet;
 use dynamics::road::{Obstacle, Road};
 use dynamics::target4dof::FourDofTarget;
@@ -669,6 +670,84 @@ fn a_push_is_done_without_waiting_for_the_stopping_point() {
     );
     assert!(p.push_done(&reversed(0.0), tol).unwrap());
     assert_eq!(p.plan(&reversed(0.0)).unwrap().mode, Mode::Stabilise);
+}
+
+/// A push that turns the target round (`push_round`, the half-scale platform): over the
+/// window the bullet's contact pose keeps its distance and bearing from the target's
+/// rear-quarter point while the target turns (without it, from the target's c.g., so a
+/// target turned 1 rad since the push began has its rear quarter swung away from the
+/// bullet); and while the push is under way the planner does not end it on the prediction
+/// that the target reverses by itself, as it does for a push without it (or before one).
+#[test]
+fn a_push_round_follows_the_rear_quarter_and_is_not_ended_by_the_prediction() {
+    use planner::href::{fill_reference, Timing};
+    let road = road();
+    let (xt, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
+    let pkg = planner(PlannerSettings::default())
+        .plan(&input(&road, &[], xt, xb))
+        .unwrap()
+        .clone();
+    assert_eq!(pkg.mode, Mode::Pit);
+    let (t0, t1) = pkg.window;
+    let psi0 = xt[2] - 1.0;
+    let timing = Timing {
+        time: t0,
+        dt: 0.05,
+        pit_frame: Some(psi0),
+        length_scale: 1.0,
+    };
+    let rot =
+        |a: f64, v: Vec2| Vec2::new(a.cos() * v.x - a.sin() * v.y, a.sin() * v.x + a.cos() * v.y);
+    let (cp, rel0) = (pkg.contact_point, pkg.contact_rel_pos);
+    let mut r = mpc::Reference::new(20);
+    for round in [false, true] {
+        let s = PlannerSettings {
+            push_round: round,
+            ..PlannerSettings::default()
+        };
+        fill_reference(&pkg, &s, &mut r, &xt, &xb, timing);
+        let mut checked = 0;
+        for (k, st) in r.stages.iter().enumerate() {
+            let tau = t0 + (k + 1) as f64 * 0.05;
+            if tau > t1 {
+                break;
+            }
+            let psi = xt[2] + pkg.heading_at(tau).unwrap() - pkg.heading_at(t0).unwrap();
+            let anchor = if round { cp } else { Vec2::zeros() };
+            let offset = rot(psi, st.rel_pos - anchor) - rot(psi0, rel0 - anchor);
+            assert!(
+                offset.norm() < 1e-9,
+                "push_round {round}, stage {k}: {offset:?}"
+            );
+            let from_quarter = (st.rel_pos - cp).norm() - (rel0 - cp).norm();
+            if round {
+                assert!(from_quarter.abs() < 1e-9, "stage {k}: {from_quarter}");
+            } else {
+                assert!(from_quarter > 1.0, "stage {k}: {from_quarter}");
+            }
+            checked += 1;
+        }
+        assert!(checked > 5, "{checked} stages in the window");
+    }
+
+    let reversed = |best_effort: bool| {
+        let (mut xt, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
+        xt[2] = std::f64::consts::PI;
+        xt[0] = -15.0;
+        let mut inp = input(&road, &[], xt, xb);
+        inp.side = Some(mpc::Side::Right);
+        inp.best_effort = best_effort;
+        inp
+    };
+    let round = PlannerSettings {
+        push_round: true,
+        ..PlannerSettings::default()
+    };
+    let mut p = planner(round);
+    assert_eq!(p.plan(&reversed(false)).unwrap().mode, Mode::Stabilise);
+    assert_ne!(p.plan(&reversed(true)).unwrap().mode, Mode::Stabilise);
+    let mut p = planner(PlannerSettings::default());
+    assert_eq!(p.plan(&reversed(true)).unwrap().mode, Mode::Stabilise);
 }
 
 /// A bullet crossing behind the target to its far side crosses as fast as the target

@@ -78,12 +78,24 @@ fn the_trial_file_holds_r1_to_r4_at_half_scale_and_the_paper_speeds() {
     }
 }
 
+/// As in the paper's table, R1 and R3 succeed and R4, the weakest excitation, does not: the
+/// half-scale settings push the slow target round (`push_round`). R2, which the paper saves,
+/// is lost here (a second bump at 2.35 s turns the target back; docs/planner.md, "Half
+/// scale").
+#[test]
+fn r1_and_r3_reverse_the_target_and_r4_does_not() {
+    for (id, saved) in [("R1", true), ("R3", true), ("R4", false)] {
+        let m = run_episode(&case(id), &config(), 0).unwrap().metrics;
+        assert_eq!(m.success, saved, "{id}: {m:?}");
+        assert!(
+            !m.boundary_violation && !m.secondary_collision,
+            "{id}: {m:?}"
+        );
+    }
+}
+
 #[test]
 fn r1_turns_the_target_safely_with_a_sane_impact() {
-    // R1's full reversal is a knife edge at this scale (docs/planner.md, "Half scale": it
-    // succeeded or not with the last bit of the controller's time), so what is asserted is
-    // what holds robustly: the push turns the target by more than 30° with nothing hit and
-    // no edge crossed.
     let r = run_episode(&case("R1"), &config(), 0).unwrap();
     let m = r.metrics;
     assert!(

@@ -394,9 +394,11 @@ impl Planner {
         let lane = self.begin(input);
         // The target reverses without further push (a PIT under way that has done its
         // work, or a target spinning out by itself): the decision is to stop pushing. The
-        // package still reports the predicted margins.
+        // package still reports the predicted margins. A push that turns the target round
+        // (`push_round`) is not ended by a prediction while it is under way.
         let free_failure = {
-            if self.free_rollout_reverses(input, lane) {
+            let pushing_round = input.best_effort && self.settings.push_round;
+            if !pushing_round && self.free_rollout_reverses(input, lane) {
                 self.package.candidates = 0;
                 self.package.feasible_candidates = 0;
                 self.fill_package(Mode::Stabilise, None, None, lane, input);
