@@ -154,8 +154,7 @@ pub struct PlannerSettings {
     /// motion ends it (the planner's "reverses by itself", the closed loop's release,
     /// `phases.let_go_turn`), nor a lost contact or the window's end.
     /// Off at full size, where the target's own momentum completes the spin after a short
-    /// push: there the rear-quarter pose saved 185 of the 961 even-numbered full-size scenes
-    /// against 458 (`docs/planner.md`, "Half scale").
+    /// push (`docs/planner.md`, "Half scale").
     pub push_round: bool,
     pub yaw_decay: f64,
     /// Deceleration of the spun target for the post-PIT stopping point while its tyres slide

@@ -3,7 +3,7 @@
 //! deterministic.
 
 use dynamics::bullet::BulletState;
-use dynamics::geometry::Vec2;
+use dynamics::geometry::{rotate, Vec2};
 use dynamics::params::ParamSet;
 use dynamics::road::{Obstacle, Road};
 use dynamics::target4dof::FourDofTarget;
@@ -696,8 +696,6 @@ fn a_push_round_follows_the_rear_quarter_and_is_not_ended_by_the_prediction() {
         pit_frame: Some(psi0),
         length_scale: 1.0,
     };
-    let rot =
-        |a: f64, v: Vec2| Vec2::new(a.cos() * v.x - a.sin() * v.y, a.sin() * v.x + a.cos() * v.y);
     let (cp, rel0) = (pkg.contact_point, pkg.contact_rel_pos);
     let mut r = mpc::Reference::new(20);
     for round in [false, true] {
@@ -714,7 +712,7 @@ fn a_push_round_follows_the_rear_quarter_and_is_not_ended_by_the_prediction() {
             }
             let psi = xt[2] + pkg.heading_at(tau).unwrap() - pkg.heading_at(t0).unwrap();
             let anchor = if round { cp } else { Vec2::zeros() };
-            let offset = rot(psi, st.rel_pos - anchor) - rot(psi0, rel0 - anchor);
+            let offset = rotate(psi, st.rel_pos - anchor) - rotate(psi0, rel0 - anchor);
             assert!(
                 offset.norm() < 1e-9,
                 "push_round {round}, stage {k}: {offset:?}"

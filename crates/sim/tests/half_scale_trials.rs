@@ -78,9 +78,9 @@ fn the_trial_file_holds_r1_to_r4_at_half_scale_and_the_paper_speeds() {
     }
 }
 
-/// As in the paper's table, R1 and R3 succeed and R4, the weakest excitation, does not: the
-/// half-scale settings push the slow target round (`push_round`). R2, which the paper saves,
-/// is lost here (a second bump at 2.35 s turns the target back; docs/planner.md, "Half
+/// As in the paper's table, R1 and R3 succeed and R4 does not: the half-scale settings push
+/// the slow target round (`push_round`). R4 and R2 (which the paper saves) end with the
+/// target stopped part of the way round, held by its braking driver (docs/planner.md, "Half
 /// scale").
 #[test]
 fn r1_and_r3_reverse_the_target_and_r4_does_not() {
