@@ -105,3 +105,56 @@ def test_a_missing_or_unreadable_bound_is_named(tmp_path, capsys):
     (tmp_path / "bad.json").write_text("{not json")
     assert cli.main(["headroom", str(tmp_path / "bad.json"), str(run)]) == 2
     assert "bad.json: not a JSON file" in capsys.readouterr().err
+
+
+def write_bench_run(folder: Path, rows) -> Path:
+    """An episodes.csv with the funnel's columns, as picopit bench writes them; rows:
+    (config, scene, success, contacts, reversed_at, decided_at, cause, failed_vehicle)."""
+    import csv
+
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / "episodes.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([*headroom.FUNNEL_COLUMNS, "error"])
+        for cfg, scene, ok, contacts, rev, dec, cause, vehicle in rows:
+            w.writerow([cfg, scene, ok, contacts, "" if rev is None else rev, dec, cause, vehicle, ""])
+    return folder
+
+
+BENCH_RUN = [
+    # s0 saved; s1 lost before contact; s2 reversed at 5 s, over the edge at 7 s; s3 (no
+    # shove saves it) lost in the push: not in the funnel of the savable scenes.
+    ("picopinn", "s0", True, 1, 4.0, 9.0, "", ""),
+    ("picopinn", "s1", False, 0, None, 6.0, "decision_infeasible", ""),
+    ("picopinn", "s2", False, 1, 5.0, 7.0, "boundary_violation", "target"),
+    ("picopinn", "s3", False, 1, None, 6.5, "secondary_collision", "target"),
+]
+
+
+def test_where_the_scenes_a_shove_could_save_are_lost(tmp_path):
+    bound = headroom.read_bound(write_bound(tmp_path / "b.json", SCENES))
+    run = compare.episodes_file(write_bench_run(tmp_path / "run", BENCH_RUN))
+    f = headroom.lost(bound, compare.read_rows(run), params="full_size")["picopinn"]
+    assert (f["scenes"], f["first_contact"], f["reversed"], f["success"]) == (3, 2, 2, 1)
+    assert f["lost"] == {"before_contact": {"decision_infeasible": {"controller": 1}},
+                         "in_push": {},
+                         "after_reversal": {"boundary_violation": {"target": 1}}}
+
+
+def test_the_command_prints_the_funnel_of_the_savable_scenes_for_a_bench_run(tmp_path, capsys):
+    path = write_bound(tmp_path / "b.json", SCENES)
+    out = tmp_path / "h.json"
+    rc = cli.main(["headroom", str(path), str(write_bench_run(tmp_path / "run", BENCH_RUN)), "--json", str(out)])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "| picopinn | 3 | 2 | 2 | 1 | 1 | 0 | 1 |" in text
+    assert json.loads(out.read_text())["lost"]["picopinn"]["success"] == 1
+    # A run without the funnel's columns gets the headroom table alone.
+    run = write_run(tmp_path / "plain", [("picopinn", "s0", True), ("picopinn", "s1", False)])
+    assert cli.main(["headroom", str(path), str(run)]) == 0
+    assert "Where the scenes" not in capsys.readouterr().out
+    # A malformed cell is one line naming the row and the column.
+    bad = [("picopinn", "s0", True, "many", 4.0, 9.0, "", "")]
+    assert cli.main(["headroom", str(path), str(write_bench_run(tmp_path / "bad", bad))]) == 2
+    err = capsys.readouterr().err
+    assert "row 1: `contacts` is 'many', not a number" in err and err.count("\n") == 1, err

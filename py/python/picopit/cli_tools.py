@@ -216,8 +216,10 @@ def _headroom_parser(sub) -> None:
             "Put a picopit oracle --json bound beside a picopit bench run: for every "
             "configuration, how many of the scenes one shove could save it saves (overall and by "
             "parameter set, road category, adhesion and target driver), and how many it saves "
-            "that no single shove does. Only the scenes the bound and every chosen configuration "
-            "ran are counted."
+            "that no single shove does; for a picopit bench run, also where the scenes a shove "
+            "could save are lost (the funnel over them: before contact, in the push, after the "
+            "reversal, by cause and who failed). Only the scenes the bound and every chosen "
+            "configuration ran are counted."
         ),
     )
     p.add_argument("bound", metavar="BOUND", help="the bound (picopit oracle --json PATH)")
@@ -239,7 +241,15 @@ def _cmd_headroom(args: argparse.Namespace) -> int:
     rows = hr.headroom(bound, cmp.read_episodes(run), configs, args.params)
     print(f"bound: {args.bound}\nrun: {run}\n")
     print(hr.markdown(rows), end="")
-    _write_rows(args.json, "headroom", {"bound": str(args.bound), "run": str(run)}, rows)
+    head: dict = {"bound": str(args.bound), "run": str(run)}
+    episodes = cmp.read_rows(run, ("config", "scenario", "success"))
+    if episodes and all(c in episodes[0] for c in hr.FUNNEL_COLUMNS):
+        from . import funnel
+        lost = hr.lost(bound, episodes, configs, args.params, str(run))
+        print("\nWhere the scenes a shove could save are lost (the funnel over those scenes only):\n")
+        print(funnel.markdown(lost))
+        head["lost"] = lost
+    _write_rows(args.json, "headroom", head, rows)
     return 0
 
 

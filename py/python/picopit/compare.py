@@ -68,8 +68,9 @@ def _truth(v: object, path: Path, line: int) -> bool:
     raise CompareError(f"{path}: row {line}: `success` is {v!r}, not true or false")
 
 
-def read_episodes(path: Path) -> Dict[Tuple[str, str], bool]:
-    """``{(config, scenario): success}`` of one run's episodes file."""
+def read_rows(path: Path, columns: Sequence[str] = COLUMNS) -> List[Mapping[str, object]]:
+    """The rows of one run's episodes file (Parquet or CSV; CSV values are strings), after
+    checking that it has ``columns``."""
     if path.suffix == ".parquet":
         try:
             import pyarrow.parquet as pq
@@ -86,11 +87,16 @@ def read_episodes(path: Path) -> Dict[Tuple[str, str], bool]:
             reader = csv.DictReader(fh)
             names = set(reader.fieldnames or ())
             rows = list(reader)
-    missing = [c for c in COLUMNS if c not in names]
+    missing = [c for c in columns if c not in names]
     if missing:
-        raise CompareError(f"{path}: no `{missing[0]}` column (need {', '.join(COLUMNS)})")
+        raise CompareError(f"{path}: no `{missing[0]}` column (need {', '.join(columns)})")
+    return rows
+
+
+def read_episodes(path: Path) -> Dict[Tuple[str, str], bool]:
+    """``{(config, scenario): success}`` of one run's episodes file."""
     out: Dict[Tuple[str, str], bool] = {}
-    for i, r in enumerate(rows, start=1):
+    for i, r in enumerate(read_rows(path), start=1):
         if r.get("error"):
             continue
         key = (str(r["config"]), str(r["scenario"]))
