@@ -238,11 +238,11 @@ def _cmd_headroom(args: argparse.Namespace) -> int:
     configs = _configs(args.configs, hr.HeadroomError)
     bound = hr.read_bound(Path(args.bound))
     run = cmp.episodes_file(Path(args.run))
-    rows = hr.headroom(bound, cmp.read_episodes(run), configs, args.params)
+    episodes = cmp.read_rows(run)
+    rows = hr.headroom(bound, cmp.episodes_of(episodes, run), configs, args.params)
     print(f"bound: {args.bound}\nrun: {run}\n")
     print(hr.markdown(rows), end="")
     head: dict = {"bound": str(args.bound), "run": str(run)}
-    episodes = cmp.read_rows(run, ("config", "scenario", "success"))
     if episodes and all(c in episodes[0] for c in hr.FUNNEL_COLUMNS):
         from . import funnel
         lost = hr.lost(bound, episodes, configs, args.params, str(run))

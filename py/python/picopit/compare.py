@@ -95,8 +95,14 @@ def read_rows(path: Path, columns: Sequence[str] = COLUMNS) -> List[Mapping[str,
 
 def read_episodes(path: Path) -> Dict[Tuple[str, str], bool]:
     """``{(config, scenario): success}`` of one run's episodes file."""
+    return episodes_of(read_rows(path), path)
+
+
+def episodes_of(rows: Sequence[Mapping[str, object]], path: Path) -> Dict[Tuple[str, str], bool]:
+    """``{(config, scenario): success}`` of rows read from ``path`` (:func:`read_rows`);
+    errored episodes are left out, a scene twice in one configuration is refused."""
     out: Dict[Tuple[str, str], bool] = {}
-    for i, r in enumerate(read_rows(path), start=1):
+    for i, r in enumerate(rows, start=1):
         if r.get("error"):
             continue
         key = (str(r["config"]), str(r["scenario"]))
