@@ -71,6 +71,67 @@ def test_oracle_subset_is_the_benchmarks_stratified_subset():
     assert len({(s["category"], s["adhesion"]) for s in chosen}) >= 6, "every stratum is drawn"
 
 
+def _episodes(tmp_path: Path, rows: str) -> Path:
+    path = tmp_path / "episodes.csv"
+    path.write_text("config,scenario,success,impact_y\n" + rows)
+    return path
+
+
+def test_oracle_keeps_the_side_a_run_pushed_from(tmp_path, capsys):
+    """--sides-of RUN: a scene the run's controller pushed is shoved only on the side of its
+    first contact (impact_y > 0: the target's left), whichever side the free search would
+    find first; a scene without a contact, or pushed only by another configuration, keeps
+    both sides."""
+    run = _episodes(tmp_path, "picopinn,sc-00000,False,-0.8\npicopinn,sc-00002,True,0.7\n"
+                              "4dof,sc-00004,False,-0.9\npicopinn,sc-00004,False,\n")
+    out = tmp_path / "oracle.json"
+    rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--ids", "sc-00000,sc-00002,sc-00004",
+                   "--settings", '{"shoves": [0.5, 1.0, 1.5, 2.0], "time_step": 0.25}', "--sides-of", str(run),
+                   "--no-progress", "--json", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "2 of them tried only on the side picopinn pushed from" in text
+    scenes = {s["id"]: s for s in json.loads(out.read_text())["scenes"]}
+    assert scenes["sc-00000"]["sides"] == [-1.0] and scenes["sc-00002"]["sides"] == [1.0]
+    assert "sides" not in scenes["sc-00004"]
+    # Unrestricted, the search tries the left first and saves sc-00000 from there.
+    free = oracle.run(oracle.select(_core.load_scenarios(str(TEXTBOOK)), ids=["sc-00000"]),
+                      oracle.resolve_settings('{"shoves": [0.5, 1.0, 1.5, 2.0], "time_step": 0.25}', False),
+                      progress=False)
+    assert free.scenes[0]["result"]["shove"]["side"] == 1.0
+    for sid, side in (("sc-00000", -1.0), ("sc-00002", 1.0)):
+        r = scenes[sid]["result"]
+        assert r["feasible"] and r["shove"]["side"] == side, (sid, r)
+    # The other configuration's side is not taken: sc-00004 tried both sides at its first size.
+    assert scenes["sc-00004"]["result"]["tried"] > scenes["sc-00002"]["result"]["tried"]
+
+
+@pytest.mark.parametrize("rows, argv, words", [
+    ("picopinn,sc-00000,False,left\n", [], "row 1: impact_y 'left'"),
+    ("4dof,sc-00000,False,0.5\n", [], "--config picopinn: not in"),
+    ("picopinn,sc-00000,False,0.5\n", ["--config", "pinn"], "it has picopinn"),
+])
+def test_oracle_refuses_a_bad_sides_of_run_naming_it(tmp_path, capsys, rows, argv, words):
+    run = _episodes(tmp_path, rows)
+    rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--ids", "sc-00000", "--no-progress",
+                   "--sides-of", str(run), *argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "Traceback" not in err, err
+
+
+def test_oracle_refuses_a_run_without_the_impact_column(tmp_path, capsys):
+    run = tmp_path / "episodes.csv"
+    run.write_text("config,scenario,success\npicopinn,sc-00000,False\n")
+    rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--ids", "sc-00000", "--no-progress",
+                   "--sides-of", str(run)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "impact_y" in err and "Traceback" not in err, err
+    rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--ids", "sc-00000", "--no-progress",
+                   "--sides-of", str(tmp_path / "missing")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "no such run" in err, err
+
+
 @pytest.mark.parametrize("argv, words", [
     (["--settings", '{"shoves": []}'], "shoves"),
     (["--settings", '{"time_step": 0}'], "time_step"),

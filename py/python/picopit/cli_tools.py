@@ -53,6 +53,11 @@ def _oracle_parser(sub) -> None:
                    help="oracle settings over the defaults, e.g. '{\"shoves\": [0.5, 1, 2, 3], "
                         "\"time_step\": 0.1}' (fields: shoves, time_step, contact_back, min_remaining, "
                         "exhaustive, sides, window, bullet_beside)")
+    p.add_argument("--sides-of", metavar="RUN",
+                   help="a picopit bench run (folder or episodes file): try each scene its controller "
+                        "pushed only on the side it pushed from (the others on both sides)")
+    p.add_argument("--config", default="picopinn", metavar="NAME",
+                   help="the configuration of --sides-of (default picopinn)")
     p.add_argument("--workers", type=int, default=1, metavar="W", help="scenes at a time (threads; default 1)")
     p.add_argument("--scene-lines", action="store_true", help="also print one line per scene")
     p.add_argument("--json", metavar="PATH", help="write the settings, per-scene results and summary here")
@@ -73,12 +78,17 @@ def _cmd_oracle(args: argparse.Namespace) -> int:
     if args.subset is not None and (ids or args.n is not None or args.first):
         raise oracle.OracleError("--subset: give it alone, not with --ids, --first or --n")
     scenes = oracle.select(scenarios, args.first, args.n, ids, args.subset)
-    res = oracle.run(scenes, settings, tiers=args.tiers, workers=args.workers, progress=not args.no_progress)
+    sides = oracle.sides_of(Path(args.sides_of), args.config) if args.sides_of else None
+    res = oracle.run(scenes, settings, tiers=args.tiers, workers=args.workers, progress=not args.no_progress,
+                     sides=sides)
     if args.scene_lines:
         for s in res.scenes:
             print(res.line(s))
     grid = f"shoves {settings['shoves']} m/s every {settings['time_step']} s"
     print(f"oracle{' tiers' if args.tiers else ''}: {len(scenes)} scenes of {args.scenarios}, {grid}")
+    if sides is not None:
+        held = sum(1 for s in scenes if s["id"] in sides)
+        print(f"oracle: {held} of them tried only on the side {args.config} pushed from in {args.sides_of}")
     print(res.markdown(), end="")
     if args.json:
         print(f"oracle: wrote {oracle.write_json(res, Path(args.json))}")

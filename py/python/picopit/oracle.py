@@ -19,12 +19,18 @@ when the push lands anywhere in the 3 × 3 box of the best shove); ``held-first`
 ``held-robust``, ``held-exp`` (the choice of a planner that sees only the driver's current
 command). Each scene takes a few seconds (tiers: the whole grid twice, far longer).
 
+With ``sides`` (``--sides-of RUN``) each scene that a benchmark run's controller pushed is
+tried only on the side it pushed from (the sign of its first contact's ``impact_y``, the
+target's body frame, y to the left): the bound of a controller that keeps its choice of side,
+which says whether a scene it lost was lost to its side or to its push.
+
 The scenes run on threads (the core releases the GIL), in scene order in the results.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -155,9 +161,45 @@ def select(scenarios: Sequence[Mapping[str, Any]], first: int = 0, n: Optional[i
     return chosen
 
 
+def sides_of(run: Path, config: str) -> Dict[str, float]:
+    """``{scene: side}`` of the scenes that configuration ``config`` of a benchmark run (its
+    folder or episodes file) pushed: +1 where its first contact was on the target's left
+    (``impact_y`` > 0), -1 on its right; scenes without a contact are left out. Raises
+    :class:`OracleError` for a run without the columns, without ``config``, or with a
+    malformed ``impact_y`` (naming the row)."""
+    from .compare import CompareError, episodes_file, read_rows
+
+    try:
+        path = episodes_file(Path(run))
+        rows = read_rows(path, ("config", "scenario", "impact_y"))
+    except CompareError as e:
+        raise OracleError(f"--sides-of: {e}") from None
+    out: Dict[str, float] = {}
+    found = False
+    for i, r in enumerate(rows, start=1):
+        if str(r["config"]) != config:
+            continue
+        found = True
+        y = r["impact_y"]
+        if y is None or y == "":
+            continue
+        try:
+            y = float(y)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            raise OracleError(f"--sides-of: {path}: row {i}: impact_y {y!r} is not a number") from None
+        if math.isfinite(y) and y != 0.0:
+            out[str(r["scenario"])] = 1.0 if y > 0.0 else -1.0
+    if not found:
+        configs = sorted({str(r["config"]) for r in rows})
+        raise OracleError(f"--config {config}: not in {path} (it has {', '.join(configs) or 'no rows'})")
+    return out
+
+
 def run(scenes: Sequence[Mapping[str, Any]], settings: Mapping[str, Any], tiers: bool = False,
-        workers: int = 1, progress: bool = True) -> OracleRun:
-    """The oracle (``tiers``: its tiers) on each scene, ``workers`` scenes at a time."""
+        workers: int = 1, progress: bool = True, sides: Optional[Mapping[str, float]] = None) -> OracleRun:
+    """The oracle (``tiers``: its tiers) on each scene, ``workers`` scenes at a time; a scene
+    in ``sides`` (:func:`sides_of`) is tried on that side only, and its row says so
+    (``"sides"``)."""
     text = json.dumps(dict(settings))
     fn = _core.oracle_tiers if tiers else _core.ideal_pit
     out = OracleRun(tiers=tiers, settings=dict(settings))
@@ -166,8 +208,12 @@ def run(scenes: Sequence[Mapping[str, Any]], settings: Mapping[str, Any], tiers:
         row = {"id": sc["id"], "category": sc.get("category"), "adhesion": sc.get("adhesion"),
                "driver": (sc.get("driver") or {}).get("kind"), "params": sc.get("params"),
                "result": None, "error": None}
+        own = text
+        if sides is not None and sc["id"] in sides:
+            row["sides"] = [sides[sc["id"]]]
+            own = json.dumps({**dict(settings), "sides": row["sides"]})
         try:
-            row["result"] = dict(fn(json.dumps(dict(sc)), text))
+            row["result"] = dict(fn(json.dumps(dict(sc)), own))
         except (_core.ScenarioError, ValueError) as e:
             row["error"] = str(e)
         return row
