@@ -215,6 +215,7 @@ impl PitController {
         self.next_replan = f64::NEG_INFINITY;
         self.last_command = BulletInput::zeros();
         self.mpc.reset();
+        self.planner.reset();
     }
 
     fn footprints(&self, xt: &TargetState, xb: &BulletState) -> (Obb, Obb) {

@@ -136,6 +136,11 @@ pub struct PlannerSettings {
     /// see [`Self::approach_accel`].
     pub approach_accel_min: f64,
     pub lateral_speed: f64,
+    /// The lateral speed (m/s) of a bullet crossing behind the target to its far side (the
+    /// inside of a curve, the side against the target's drift): it is held behind the
+    /// target's rear bumper while it crosses, clear of it, so it changes lanes briskly; no
+    /// less than `lateral_speed`, which closes in beside the target.
+    pub crossing_speed: f64,
     pub settle_time: f64,
     /// Stand-off outside the contact line while closing in (m).
     pub standoff: f64,
@@ -200,6 +205,7 @@ impl Default for PlannerSettings {
             approach_accel_g: 0.25,
             approach_accel_min: 1.5,
             lateral_speed: 1.0,
+            crossing_speed: 1.5,
             settle_time: 0.3,
             standoff: 0.6,
             turn_in: 0.4,
@@ -279,6 +285,7 @@ impl PlannerSettings {
             ("approach_speed", self.approach_speed),
             ("approach_accel_g", self.approach_accel_g),
             ("lateral_speed", self.lateral_speed),
+            ("crossing_speed", self.crossing_speed),
             ("heading_tol", self.heading_tol),
             ("stop_decel_fraction", self.stop_decel_fraction),
             ("violation_tol", self.violation_tol),

@@ -600,6 +600,57 @@ fn on_a_curve_the_push_comes_from_the_inside() {
     assert_eq!(side_for(None, 3.5), Side::Left);
 }
 
+/// On a straight road a target that drifts across it under its own held steer (a driver off
+/// the controls) is pushed from the side away from its drift, so that the spin bends its path
+/// back onto the road. The planner decides it once, at a plan a second after the first, if
+/// the steer has not moved: a target running straight, or one whose driver steers, keeps the
+/// bullet's own side; a new maneuver (`reset`) decides afresh.
+#[test]
+fn on_a_straight_the_push_works_against_the_targets_drift() {
+    use mpc::reference::Side;
+    let road = road();
+    let plans = |p: &mut Planner, steers: [f64; 2], heading: f64, ry: f64| {
+        let (mut xt, xb) = states(&road, -8.0, ry, 18.0, 20.0);
+        xt[2] = heading;
+        let mut sides = [Side::Left; 2];
+        for (k, steer) in steers.into_iter().enumerate() {
+            let mut inp = input(&road, &[], xt, xb);
+            inp.time = 3.0 + k as f64;
+            inp.target_input = TargetInput::new(steer, 0.0);
+            sides[k] = p.plan(&inp).unwrap().side;
+        }
+        sides
+    };
+    let side_for = |steer: f64, heading: f64, ry: f64| {
+        plans(
+            &mut planner(PlannerSettings::default()),
+            [steer; 2],
+            heading,
+            ry,
+        )
+    };
+    // Steering left (it curves towards the left edge): pushed from the right, wherever the
+    // bullet starts, once the steer has been seen held; and the other way round.
+    assert_eq!(side_for(0.006, 0.0, 3.5), [Side::Left, Side::Right]);
+    assert_eq!(side_for(0.006, 0.0, -3.5), [Side::Right, Side::Right]);
+    assert_eq!(side_for(-0.006, 0.0, 3.5), [Side::Left, Side::Left]);
+    assert_eq!(side_for(-0.006, 0.0, -3.5), [Side::Right, Side::Left]);
+    // Its course off the road's heading counts with its curve: heading right but curving
+    // left so that it ends up left of its lane.
+    assert_eq!(side_for(0.006, -0.01, 3.5)[1], Side::Right);
+    // No drift, or too little to matter: the bullet's own side.
+    assert_eq!(side_for(0.0, 0.0, 3.5)[1], Side::Left);
+    assert_eq!(side_for(0.0005, 0.0, 3.5)[1], Side::Left);
+    assert_eq!(side_for(0.0005, 0.0, -3.5)[1], Side::Right);
+    // A driver who steers is not taken at a held command.
+    let mut p = planner(PlannerSettings::default());
+    assert_eq!(plans(&mut p, [0.004, 0.006], 0.0, 3.5)[1], Side::Left);
+    // Decided once per maneuver: later plans keep it, a reset decides afresh.
+    assert_eq!(plans(&mut p, [0.006; 2], 0.0, 3.5)[1], Side::Left);
+    p.reset();
+    assert_eq!(plans(&mut p, [0.006; 2], 0.0, 3.5)[1], Side::Right);
+}
+
 /// The closed loop of the push: `push_done` says whether the target, left alone now, would
 /// reach the reversed heading inside the road. A target sliding on at 8 m/s with its body
 /// turned 90° does if it still spins at 1.5 rad/s, not without a spin (it stays across the

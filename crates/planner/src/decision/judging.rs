@@ -58,11 +58,16 @@ impl Planner {
 
     /// The free prediction (no force) from `input`, judged: whether the target, left alone
     /// now, reaches the terminal set (reversed heading, inside the road, clear of the
-    /// obstacles). Leaves `self.xs` the free prediction and `self.inside` the side inside
-    /// the curve ahead; the package is not touched.
+    /// obstacles). Leaves `self.xs` the free prediction and `self.inside` the side the
+    /// bullet works on: inside the curve ahead, or on a straight against the target's own
+    /// drift ([`Self::against_drift`]); the package is not touched.
     pub(super) fn free_rollout_reverses(&mut self, input: &PlannerInput<'_>, lane: f64) -> bool {
         self.inside = self.inside_side(input);
-        self.free_rollout_within(input, lane, self.settings.heading_tol, true)
+        let reverses = self.free_rollout_within(input, lane, self.settings.heading_tol, true);
+        if self.inside.is_none() {
+            self.inside = self.against_drift(input);
+        }
+        reverses
     }
 
     /// As [`Self::free_rollout_reverses`] with the terminal heading within `heading_tol`;

@@ -41,6 +41,7 @@ mod judging;
 mod prediction;
 mod program;
 mod stations;
+use stations::Drift;
 
 use program::{assemble, DummyRows};
 
@@ -176,6 +177,9 @@ pub struct Planner {
     /// The inside of the curve the target is on or coming to, if the bullet has room
     /// there ([`Planner::inside_side`]).
     inside: Option<Side>,
+    /// The side against a driverless target's drift on a straight, decided once per
+    /// maneuver ([`Planner::against_drift`]).
+    drift: Drift,
     input_u: TargetInput,
     /// The target driver of the rollout: `None` holds `input_u` (the push's rollouts); the
     /// race test rolls the free motion out under a lane keeper too.
@@ -294,6 +298,7 @@ impl Planner {
             contact_x: rear_quarter_x(params),
             psi_rev: 0.0,
             inside: None,
+            drift: Drift::Unseen,
             input_u: TargetInput::zeros(),
             lane_keeper: None,
             time: 0.0,
@@ -369,6 +374,11 @@ impl Planner {
             *best_any = Some(o);
             self.best.copy_from_slice(&self.forces);
         }
+    }
+
+    /// Start a new maneuver: forget the side chosen against the target's drift.
+    pub fn reset(&mut self) {
+        self.drift = Drift::Unseen;
     }
 
     /// Take the call's time, the target driver's command and its model, and the

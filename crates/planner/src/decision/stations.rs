@@ -12,6 +12,25 @@ const CURVE_RADIUS: f64 = 1000.0;
 /// How far ahead the side choice looks for a curve (s at the target's speed).
 const CURVE_LOOK: f64 = 4.0;
 
+/// Drift across a straight road (m, full size) over [`CURVE_LOOK`] beyond which the side
+/// choice works against it ([`Planner::drift_side`]).
+const DRIFT_MIN: f64 = 1.0;
+
+/// How long (s) the target's steer must stay as it was at the first plan for the planner
+/// to take it as held (a driver off the controls) and to work against its drift.
+const DRIFT_WATCH: f64 = 0.9;
+
+/// The side choice against the target's own drift ([`Planner::against_drift`]): decided
+/// once per maneuver.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum Drift {
+    /// No plan yet.
+    Unseen,
+    /// The time and the target's steer at the first plan.
+    Watching(f64, f64),
+    Decided(Option<Side>),
+}
+
 impl Planner {
     /// The bullet's contact pose on `side` (target frame) at the current candidate's contact
     /// point.
@@ -113,10 +132,10 @@ impl Planner {
     }
 
     /// How fast (m/s) the bullet's approach moves across relative to the target towards
-    /// `side`: `lateral_speed`, plus the target's own drift across the road towards the
-    /// bullet when the bullet crosses to the far side (a target drifting out of its lane
-    /// passes in front of a bullet that holds its line: the bullet crosses behind it by
-    /// keeping its course). The drift is the relative lateral speed of a bullet running
+    /// `side`: `lateral_speed` on its own side; `crossing_speed` plus the target's own
+    /// drift across the road towards the bullet when the bullet crosses to the far side (a
+    /// target drifting out of its lane passes in front of a bullet that holds its line: the
+    /// bullet crosses behind it by keeping its course). The drift is the relative lateral speed of a bullet running
     /// along the road at its speed, in the target's frame. The crossing is no faster than
     /// the approach's relative speed cap `approach_speed` (a target heading straight across
     /// the road would otherwise ask for the bullet's whole speed sideways).
@@ -139,7 +158,8 @@ impl Planner {
             Vec2::new(xb[3].hypot(xb[4]), 0.0),
         );
         let drift = side.sign() * (holding.y - xt[idx::VY]);
-        (s.lateral_speed + drift.max(0.0)).min(s.approach_speed.max(s.lateral_speed))
+        let cross = s.crossing_speed.max(s.lateral_speed);
+        (cross + drift.max(0.0)).min(s.approach_speed.max(cross))
     }
 
     /// Lateral room (m) the bullet has on `side` at its stand-off pose beside the target's
@@ -222,6 +242,56 @@ impl Planner {
             return None;
         }
         let side = if kappa > 0.0 { Side::Left } else { Side::Right };
+        self.side_open(side, input).then_some(side)
+    }
+
+    /// The side against the target's drift, decided once per maneuver: at the first plan
+    /// at least [`DRIFT_WATCH`] after the first, if the target's steer has not moved since
+    /// (a driver off the controls holds it, so the free prediction that holds it is the
+    /// target's path; a driver who steers, a lane keeper, is not predicted by a held
+    /// command and keeps the bullet's side), by [`Self::drift_side`] then. `None` until
+    /// decided, or when the bullet has no room on the chosen side now.
+    pub(super) fn against_drift(&mut self, input: &PlannerInput<'_>) -> Option<Side> {
+        let steer = input.target_input[0];
+        match self.drift {
+            Drift::Unseen => self.drift = Drift::Watching(input.time, steer),
+            Drift::Watching(t0, s0) if input.time - t0 >= DRIFT_WATCH => {
+                let held = (steer - s0).abs() < 1e-6;
+                self.drift = Drift::Decided(if held { self.drift_side(input) } else { None });
+            }
+            _ => {}
+        }
+        match self.drift {
+            Drift::Decided(Some(side)) => self.side_open(side, input).then_some(side),
+            _ => None,
+        }
+    }
+
+    /// On a straight road, the side away from the target's own drift across it: the free
+    /// prediction (`self.xs`, the driver's command held) carried on along its arc (its
+    /// course off the road's heading and its yaw rate) to [`CURVE_LOOK`] from now. A target
+    /// that drifts more than [`DRIFT_MIN`] to one side is pushed from the other, so that its
+    /// nose turns away from the edge it drifts to and its path bends back onto the road
+    /// while it spins (the curve rule's reason, with the target's own curve in place of the
+    /// road's). `None` when it drifts less, or when the bullet has no room on that side.
+    pub(super) fn drift_side(&self, input: &PlannerInput<'_>) -> Option<Side> {
+        let x0 = &input.target;
+        let xn = &self.xs[self.n];
+        let road = input.road;
+        let d0 = road.project(Vec2::new(x0[idx::X], x0[idx::Y])).d;
+        let f = road.project(Vec2::new(xn[idx::X], xn[idx::Y]));
+        let v = xn[idx::VX].hypot(xn[idx::VY]);
+        if v < 1.0 {
+            return None;
+        }
+        let course = wrap(xn[idx::PSI] + xn[idx::VY].atan2(xn[idx::VX]) - f.heading);
+        let kappa = xn[idx::R] / v - f.curvature;
+        let t = (CURVE_LOOK - self.n as f64 * self.settings.dt).max(0.0);
+        let drift = f.d + v * t * course.sin() + 0.5 * kappa * (v * t).powi(2) - d0;
+        if drift.abs() < DRIFT_MIN * self.len_scale {
+            return None;
+        }
+        let side = if drift > 0.0 { Side::Right } else { Side::Left };
         self.side_open(side, input).then_some(side)
     }
 
