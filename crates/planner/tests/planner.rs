@@ -799,13 +799,14 @@ fn a_push_round_follows_the_rear_quarter_and_is_not_ended_by_the_prediction() {
     assert_eq!(p.plan(&reversed(true)).unwrap().mode, Mode::Stabilise);
 }
 
-/// A bullet crossing behind the target to its far side crosses as fast as the target
-/// drifts across its line: with the target heading 5° across the road towards a bullet
-/// that holds the road's course at 17 m/s, the approach crosses at `lateral_speed` plus
-/// 17 sin 5° ≈ 1.48 m/s; towards its own side, and across from a target that keeps
-/// its course or drifts away, at `lateral_speed` alone; never faster than the approach's
-/// `approach_speed` (a target heading 80° across the road towards the bullet). A chase on
-/// the inside of a curve carries the crossing speed in its package.
+/// A bullet crossing behind the target to its far side crosses at `crossing_speed`, and as
+/// much faster as the target drifts across its line: with the target heading 5° across the
+/// road towards a bullet that holds the road's course at 17 m/s, at `crossing_speed` plus
+/// 17 sin 5° ≈ 1.48 m/s; across from a target that keeps its course or drifts away, at
+/// `crossing_speed` alone; towards its own side at `lateral_speed`; never faster than the
+/// approach's `approach_speed` (a target heading 80° across the road towards the bullet),
+/// nor slower than `lateral_speed`. A chase on the inside of a curve carries the crossing
+/// speed in its package.
 #[test]
 fn a_target_drifting_across_the_bullets_line_speeds_its_crossing() {
     use mpc::reference::Side;
@@ -821,17 +822,27 @@ fn a_target_drifting_across_the_bullets_line_speeds_its_crossing() {
     };
     let drift = 17.0 * 5f64.to_radians().sin();
     // Heading 5° to the right: towards the bullet on the right.
+    assert!(s.crossing_speed > s.lateral_speed);
     let far = crossing(-5f64.to_radians(), Side::Left);
     assert!(
-        (far - (s.lateral_speed + drift)).abs() < 1e-9,
+        (far - (s.crossing_speed + drift)).abs() < 1e-9,
         "far side {far} against {}",
-        s.lateral_speed + drift
+        s.crossing_speed + drift
     );
     assert_eq!(crossing(-5f64.to_radians(), Side::Right), s.lateral_speed);
-    assert_eq!(crossing(0.0, Side::Left), s.lateral_speed);
-    assert_eq!(crossing(5f64.to_radians(), Side::Left), s.lateral_speed);
-    assert!(s.lateral_speed + 17.0 * 80f64.to_radians().sin() > s.approach_speed);
+    assert_eq!(crossing(0.0, Side::Left), s.crossing_speed);
+    assert_eq!(crossing(5f64.to_radians(), Side::Left), s.crossing_speed);
+    assert!(s.crossing_speed + 17.0 * 80f64.to_radians().sin() > s.approach_speed);
     assert_eq!(crossing(-80f64.to_radians(), Side::Left), s.approach_speed);
+    // A crossing speed below the closing-in speed is raised to it.
+    let slow = planner(PlannerSettings {
+        crossing_speed: 0.5,
+        ..s.clone()
+    });
+    assert_eq!(
+        slow.crossing_speed(Side::Left, &road, &xt0, &xb),
+        s.lateral_speed
+    );
     // A left curve ahead, the bullet on the right and the target heading 5° to the right:
     // the chase goes to the inside (the far side), and its package crosses at the
     // drift-assisted speed.
@@ -841,7 +852,7 @@ fn a_target_drifting_across_the_bullets_line_speeds_its_crossing() {
     let mut q = planner(s.clone());
     let pkg = q.plan(&input(&curve, &[], xt, xb)).unwrap().clone();
     assert_eq!(pkg.side, Side::Left);
-    let expected = s.lateral_speed + 20.0 * 5f64.to_radians().sin();
+    let expected = s.crossing_speed + 20.0 * 5f64.to_radians().sin();
     assert!(
         (pkg.lateral_speed - expected).abs() < 1e-9,
         "{} against {expected}",
