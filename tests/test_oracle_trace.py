@@ -182,9 +182,9 @@ def test_trace_shows_the_contact_and_the_outcome(tmp_path, capsys):
 
 
 def test_trace_names_why_a_plan_aborts(capsys):
-    """Textbook sc-00133 ends "decision infeasible": its plans say why they abort (the
-    infeasibility the upper layer found) and every plan names its side."""
-    rc = cli.main(["trace", "sc-00133", "--scenarios", str(TEXTBOOK), "--every", "100", "--plans"])
+    """Dataset scene sc-01093 (a curve) ends "decision infeasible": its plans say why they
+    abort (the infeasibility the upper layer found) and every plan names its side."""
+    rc = cli.main(["trace", "sc-01093", "--scenarios", str(DATASET), "--every", "100", "--plans"])
     out = capsys.readouterr().out
     assert rc == 0, out
     plans = [l for l in out.splitlines() if l.startswith("plan at")]
