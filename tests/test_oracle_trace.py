@@ -142,6 +142,7 @@ def test_oracle_refuses_a_run_without_the_impact_column(tmp_path, capsys):
     (["--workers", "0"], "--workers"),
     (["--subset", "0"], "--subset"),
     (["--subset", "8", "--n", "4"], "--subset"),
+    (["--config", "pinn"], "--sides-of"),
 ])
 def test_oracle_refuses_bad_input_naming_it(capsys, argv, words):
     rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--no-progress", *argv])

@@ -56,7 +56,7 @@ def _oracle_parser(sub) -> None:
     p.add_argument("--sides-of", metavar="RUN",
                    help="a picopit bench run (folder or episodes file): try each scene its controller "
                         "pushed only on the side it pushed from (the others on both sides)")
-    p.add_argument("--config", default="picopinn", metavar="NAME",
+    p.add_argument("--config", metavar="NAME",
                    help="the configuration of --sides-of (default picopinn)")
     p.add_argument("--workers", type=int, default=1, metavar="W", help="scenes at a time (threads; default 1)")
     p.add_argument("--scene-lines", action="store_true", help="also print one line per scene")
@@ -78,7 +78,10 @@ def _cmd_oracle(args: argparse.Namespace) -> int:
     if args.subset is not None and (ids or args.n is not None or args.first):
         raise oracle.OracleError("--subset: give it alone, not with --ids, --first or --n")
     scenes = oracle.select(scenarios, args.first, args.n, ids, args.subset)
-    sides = oracle.sides_of(Path(args.sides_of), args.config) if args.sides_of else None
+    if args.config is not None and not args.sides_of:
+        raise oracle.OracleError(f"--config {args.config}: only with --sides-of RUN")
+    config = args.config or "picopinn"
+    sides = oracle.sides_of(Path(args.sides_of), config) if args.sides_of else None
     res = oracle.run(scenes, settings, tiers=args.tiers, workers=args.workers, progress=not args.no_progress,
                      sides=sides)
     if args.scene_lines:
@@ -88,7 +91,7 @@ def _cmd_oracle(args: argparse.Namespace) -> int:
     print(f"oracle{' tiers' if args.tiers else ''}: {len(scenes)} scenes of {args.scenarios}, {grid}")
     if sides is not None:
         held = sum(1 for s in scenes if s["id"] in sides)
-        print(f"oracle: {held} of them tried only on the side {args.config} pushed from in {args.sides_of}")
+        print(f"oracle: {held} of them tried only on the side {config} pushed from in {args.sides_of}")
     print(res.markdown(), end="")
     if args.json:
         print(f"oracle: wrote {oracle.write_json(res, Path(args.json))}")

@@ -1,7 +1,8 @@
 //! Where the bullet pushes and when it can: its contact poses along the target's rear
-//! quarter, where it touches, its earliest arrival at a station (the approach profile), and
+//! quarter, where it touches, its earliest arrival at a station (the approach profile),
 //! which sides are open to it (room beside the target, obstacles along the stand-off pose,
-//! holding back).
+//! holding back), and which side it works on (the inside of a curve, against a driverless
+//! target's drift).
 
 use super::*;
 
