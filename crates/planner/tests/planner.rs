@@ -4,58 +4,14 @@
 
 use dynamics::bullet::BulletState;
 use dynamics::geometry::{rotate, Vec2};
-use dynamics::params::ParamSet;
 use dynamics::road::{Obstacle, Road};
 use dynamics::target4dof::FourDofTarget;
 use dynamics::{TargetInput, TargetState};
 use planner::decision::wrap;
-use planner::{DecisionPackage, Infeasible, Mode, Planner, PlannerInput, PlannerSettings};
+mod common;
 
-fn params() -> ParamSet {
-    ParamSet::builtin("full_size").unwrap()
-}
-
-/// A planner with the QP's wall-clock limit out of the way: an unoptimised build is some
-/// 20x slower, and a QP stopped by the clock would make the outcome machine-dependent.
-fn planner(mut settings: PlannerSettings) -> Planner {
-    settings.qp.time_limit = 10.0;
-    let p = params();
-    let model = Box::new(FourDofTarget::new(&p.target, 0.9, settings.dt));
-    Planner::new(&p, 0.9, model, settings).unwrap()
-}
-
-fn road() -> Road {
-    Road::straight(3000.0, 3, 3.5, 1.0)
-}
-
-/// Target in the middle lane at `vt`, bullet at (`rx`, `ry`) from it at `vb`.
-fn states(road: &Road, rx: f64, ry: f64, vt: f64, vb: f64) -> (TargetState, BulletState) {
-    let lane = road.lane_center_offset(1);
-    let mut xt = TargetState::zeros();
-    xt[0] = vt;
-    xt[6] = 100.0;
-    xt[7] = lane;
-    let xb = BulletState::from_column_slice(&[100.0 + rx, lane + ry, 0.0, vb, 0.0, 0.0]);
-    (xt, xb)
-}
-
-fn input<'a>(
-    road: &'a Road,
-    obstacles: &'a [Obstacle],
-    xt: TargetState,
-    xb: BulletState,
-) -> PlannerInput<'a> {
-    PlannerInput {
-        time: 3.0,
-        target: xt,
-        bullet: xb,
-        target_input: TargetInput::zeros(),
-        road,
-        obstacles,
-        side: None,
-        best_effort: false,
-    }
-}
+use common::{input, params, planner, road, states};
+use planner::{DecisionPackage, Infeasible, Mode, Planner, PlannerSettings};
 
 fn check_consistent(p: &DecisionPackage, s: &PlannerSettings, force_max: f64) {
     let n = s.steps();
@@ -574,88 +530,6 @@ fn a_stand_off_line_blocked_ahead_holds_the_chase_back() {
     assert!(r.stages.iter().all(|st| st.rel_pos.y > 1.0));
 }
 
-/// On a curve the bullet works on the inside (its push turns the target's nose into the
-/// curve, and the spin's path bends with the road), from whichever side it starts; on a
-/// straight it keeps its own side. The curve begins 20 m ahead of the target, within the
-/// look-ahead of the side choice.
-#[test]
-fn on_a_curve_the_push_comes_from_the_inside() {
-    let side_for = |radius: Option<f64>, ry: f64| {
-        let road = match radius {
-            Some(r) => Road::curved(120.0, r, 400.0, 30.0, 3, 3.5, 1.0),
-            None => road(),
-        };
-        let (xt, xb) = states(&road, -8.0, ry, 18.0, 20.0);
-        let mut p = planner(PlannerSettings::default());
-        p.plan(&input(&road, &[], xt, xb)).unwrap().side
-    };
-    use mpc::reference::Side;
-    // A left curve: inside is the target's left, whether the bullet starts right or left.
-    assert_eq!(side_for(Some(150.0), -3.5), Side::Left);
-    assert_eq!(side_for(Some(150.0), 3.5), Side::Left);
-    // A right curve: inside is the right.
-    assert_eq!(side_for(Some(-150.0), 3.5), Side::Right);
-    // A straight road: the bullet's own side.
-    assert_eq!(side_for(None, -3.5), Side::Right);
-    assert_eq!(side_for(None, 3.5), Side::Left);
-}
-
-/// On a straight road a target that drifts across it under its own held steer (a driver off
-/// the controls) is pushed from the side away from its drift, so that the spin bends its path
-/// back onto the road. The planner decides it once, at a plan a second after the first, if
-/// the steer has not moved: a target running straight, or one whose driver steers, keeps the
-/// bullet's own side; a new maneuver (`reset`) decides afresh.
-#[test]
-fn on_a_straight_the_push_works_against_the_targets_drift() {
-    use mpc::reference::Side;
-    let road = road();
-    let plans = |p: &mut Planner, steers: [f64; 2], heading: f64, ry: f64| {
-        let (mut xt, xb) = states(&road, -8.0, ry, 18.0, 20.0);
-        xt[2] = heading;
-        let mut sides = [Side::Left; 2];
-        for (k, steer) in steers.into_iter().enumerate() {
-            let mut inp = input(&road, &[], xt, xb);
-            inp.time = 3.0 + k as f64;
-            inp.target_input = TargetInput::new(steer, 0.0);
-            sides[k] = p.plan(&inp).unwrap().side;
-        }
-        sides
-    };
-    let side_for = |steer: f64, heading: f64, ry: f64| {
-        plans(
-            &mut planner(PlannerSettings::default()),
-            [steer; 2],
-            heading,
-            ry,
-        )
-    };
-    // Steering left (it curves towards the left edge): pushed from the right, wherever the
-    // bullet starts, once the steer has been seen held; and the other way round.
-    assert_eq!(side_for(0.006, 0.0, 3.5), [Side::Left, Side::Right]);
-    assert_eq!(side_for(0.006, 0.0, -3.5), [Side::Right, Side::Right]);
-    assert_eq!(side_for(-0.006, 0.0, 3.5), [Side::Left, Side::Left]);
-    assert_eq!(side_for(-0.006, 0.0, -3.5), [Side::Right, Side::Left]);
-    // Its course off the road's heading counts with its curve: heading right but curving
-    // left so that it ends up left of its lane.
-    assert_eq!(side_for(0.006, -0.01, 3.5)[1], Side::Right);
-    // No drift, or too little to matter: the bullet's own side.
-    assert_eq!(side_for(0.0, 0.0, 3.5)[1], Side::Left);
-    assert_eq!(side_for(0.0005, 0.0, 3.5)[1], Side::Left);
-    assert_eq!(side_for(0.0005, 0.0, -3.5)[1], Side::Right);
-    // A driver who steers is not taken at a held command.
-    let mut p = planner(PlannerSettings::default());
-    assert_eq!(plans(&mut p, [0.004, 0.006], 0.0, 3.5)[1], Side::Left);
-    // Decided once per maneuver: later plans keep it, a reset decides afresh.
-    assert_eq!(plans(&mut p, [0.006; 2], 0.0, 3.5)[1], Side::Left);
-    p.reset();
-    assert_eq!(plans(&mut p, [0.006; 2], 0.0, 3.5)[1], Side::Right);
-}
-
-/// The closed loop of the push: `push_done` says whether the target, left alone now, would
-/// reach the reversed heading inside the road. A target sliding on at 8 m/s with its body
-/// turned 90° does if it still spins at 1.5 rad/s, not without a spin (it stays across the
-/// road) nor spinning at 4 rad/s (it turns on past the reversed heading); the tolerance
-/// binds, and the package is left as it was.
 #[test]
 fn a_push_is_done_once_the_target_left_alone_reverses() {
     let road = road();
@@ -797,65 +671,4 @@ fn a_push_round_follows_the_rear_quarter_and_is_not_ended_by_the_prediction() {
     assert_ne!(p.plan(&reversed(true)).unwrap().mode, Mode::Stabilise);
     let mut p = planner(PlannerSettings::default());
     assert_eq!(p.plan(&reversed(true)).unwrap().mode, Mode::Stabilise);
-}
-
-/// A bullet crossing behind the target to its far side crosses at `crossing_speed`, and as
-/// much faster as the target drifts across its line: with the target heading 5° across the
-/// road towards a bullet that holds the road's course at 17 m/s, at `crossing_speed` plus
-/// 17 sin 5° ≈ 1.48 m/s; across from a target that keeps its course or drifts away, at
-/// `crossing_speed` alone; towards its own side at `lateral_speed`; never faster than the
-/// approach's `approach_speed` (a target heading 80° across the road towards the bullet),
-/// nor slower than `lateral_speed`. A chase on the inside of a curve carries the crossing
-/// speed in its package.
-#[test]
-fn a_target_drifting_across_the_bullets_line_speeds_its_crossing() {
-    use mpc::reference::Side;
-    let road = road();
-    let s = PlannerSettings::default();
-    let p = planner(s.clone());
-    // The bullet on the target's right, 8 m behind.
-    let (xt0, xb) = states(&road, -8.0, -3.5, 16.0, 17.0);
-    let crossing = |psi: f64, side: Side| {
-        let mut xt = xt0;
-        xt[2] = psi;
-        p.crossing_speed(side, &road, &xt, &xb)
-    };
-    let drift = 17.0 * 5f64.to_radians().sin();
-    // Heading 5° to the right: towards the bullet on the right.
-    assert!(s.crossing_speed > s.lateral_speed);
-    let far = crossing(-5f64.to_radians(), Side::Left);
-    assert!(
-        (far - (s.crossing_speed + drift)).abs() < 1e-9,
-        "far side {far} against {}",
-        s.crossing_speed + drift
-    );
-    assert_eq!(crossing(-5f64.to_radians(), Side::Right), s.lateral_speed);
-    assert_eq!(crossing(0.0, Side::Left), s.crossing_speed);
-    assert_eq!(crossing(5f64.to_radians(), Side::Left), s.crossing_speed);
-    assert!(s.crossing_speed + 17.0 * 80f64.to_radians().sin() > s.approach_speed);
-    assert_eq!(crossing(-80f64.to_radians(), Side::Left), s.approach_speed);
-    // A crossing speed below the closing-in speed is raised to it.
-    let slow = planner(PlannerSettings {
-        crossing_speed: 0.5,
-        ..s.clone()
-    });
-    assert_eq!(
-        slow.crossing_speed(Side::Left, &road, &xt0, &xb),
-        s.lateral_speed
-    );
-    // A left curve ahead, the bullet on the right and the target heading 5° to the right:
-    // the chase goes to the inside (the far side), and its package crosses at the
-    // drift-assisted speed.
-    let curve = Road::curved(120.0, 150.0, 400.0, 30.0, 3, 3.5, 1.0);
-    let (mut xt, xb) = states(&curve, -8.0, -3.5, 18.0, 20.0);
-    xt[2] = -5f64.to_radians();
-    let mut q = planner(s.clone());
-    let pkg = q.plan(&input(&curve, &[], xt, xb)).unwrap().clone();
-    assert_eq!(pkg.side, Side::Left);
-    let expected = s.crossing_speed + 20.0 * 5f64.to_radians().sin();
-    assert!(
-        (pkg.lateral_speed - expected).abs() < 1e-9,
-        "{} against {expected}",
-        pkg.lateral_speed
-    );
 }
