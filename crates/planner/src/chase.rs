@@ -1,7 +1,7 @@
-//! Whether the bullet may wait beside the target: its stand-off pose beside the target's
-//! predicted path must stay clear of the obstacles until the push it is chasing for is
-//! over; otherwise it holds back behind the target (a car parked in the next lane that the
-//! target passes would be in its way). Road edges are not checked here: the side with no
+//! Whether the bullet may chase beside the target: its way to its stand-off pose beside the
+//! target's predicted path, and that pose until the push it is chasing for is over, must
+//! stay clear of the obstacles; otherwise it holds back behind the target (a car parked in
+//! the next lane that the target passes would be in its way). Road edges are not checked here: the side with no
 //! room beside the target is not chased on (`Planner`'s side choice), and holding back for
 //! an edge predicted seconds ahead on a curve was measured to cost more chases than it
 //! saved.
@@ -89,6 +89,18 @@ impl Path<'_> {
         &self,
         params: &ParamSet,
         stand: StandOff,
+        span: (f64, f64),
+        clearance: f64,
+    ) -> Option<f64> {
+        self.route_blocked_at(params, |_| stand, span, clearance)
+    }
+
+    /// [`Path::blocked_at`] for a bullet moving relative to the target: `route(t)` is its
+    /// pose in the target's frame `t` seconds from now (its approach to the stand-off pose).
+    pub fn route_blocked_at(
+        &self,
+        params: &ParamSet,
+        route: impl Fn(f64) -> StandOff,
         (from, to): (f64, f64),
         clearance: f64,
     ) -> Option<f64> {
@@ -98,6 +110,7 @@ impl Path<'_> {
             .map(|i| (from + i as f64 * SAMPLE).min(to))
             .find(|&t| {
                 let pose = self.target_pose(t);
+                let stand = route(t);
                 let c = pose.world_from_body(stand.rel_pos);
                 let fp = Obb::vehicle_footprint(
                     &Pose2::new(c.x, c.y, pose.yaw + stand.rel_heading),
@@ -202,6 +215,26 @@ mod tests {
         };
         assert_eq!(
             path(&parked).blocked_at(&params, right, (0.0, 4.0), 0.5),
+            None
+        );
+        // A bullet 30 m behind the target in the left lane, closing at 5 m/s: it reaches the
+        // car (55 m ahead of it, 5 m behind its stand-off pose's pass) after about 3.2 s,
+        // which the pose beside the target never does; crossing to the target's line at
+        // 2 m/s from the start, it passes the car in the middle lane.
+        let closing = |t: f64| StandOff {
+            rel_pos: Vec2::new(-30.0 + 5.0 * t, 3.5),
+            rel_heading: 0.0,
+        };
+        let t = path(&parked)
+            .route_blocked_at(&params, closing, (0.0, 5.0), 0.5)
+            .unwrap();
+        assert!((2.5..=3.5).contains(&t), "route blocked at {t}");
+        let crossing = |t: f64| StandOff {
+            rel_pos: Vec2::new(-30.0 + 5.0 * t, (3.5 - 2.0 * t).max(0.0)),
+            rel_heading: 0.0,
+        };
+        assert_eq!(
+            path(&parked).route_blocked_at(&params, crossing, (0.0, 5.0), 0.5),
             None
         );
     }

@@ -472,9 +472,10 @@ fn a_target_that_fails_before_any_push_can_begin_is_a_lost_race() {
 /// bullet, chasing 12 m behind, would be beside the target (some 4 s from now), in that
 /// lane, when the target passes it, so its chase holds back behind the target
 /// (`hold_back`), and the MPC's reference keeps it in its lane until it is behind the
-/// target's rear, then takes it across to the target's line. A car 25 m ahead is passed
-/// before the bullet is beside the target, and without a car it waits on its stand-off
-/// line beside the target.
+/// target's rear, then takes it across to the target's line. A car 25 m ahead is passed by
+/// the target before the bullet is beside it, but it stands in the bullet's way there, and
+/// the chase holds back too; a car behind the bullet does not, and without a car it waits
+/// on its stand-off line beside the target.
 #[test]
 fn a_stand_off_line_blocked_ahead_holds_the_chase_back() {
     use planner::href::{fill_reference, Timing, HOLD_BACK};
@@ -497,10 +498,15 @@ fn a_stand_off_line_blocked_ahead_holds_the_chase_back() {
     let free = p.plan(&input(&road, &[], xt, xb)).unwrap().clone();
     assert_eq!(free.mode, Mode::Chase);
     assert!(!free.hold_back);
-    let passed = parked(25.0);
-    let early = p.plan(&input(&road, &passed, xt, xb)).unwrap();
+    let passed = parked(-20.0);
+    let behind = p.plan(&input(&road, &passed, xt, xb)).unwrap();
+    assert_eq!(behind.mode, Mode::Chase);
+    assert!(!behind.hold_back);
+    let in_the_way = parked(25.0);
+    let early = p.plan(&input(&road, &in_the_way, xt, xb)).unwrap();
     assert_eq!(early.mode, Mode::Chase);
-    assert!(!early.hold_back);
+    assert!(early.hold_back);
+    assert!(early.lateral_speed >= s.crossing_speed);
     let parked = parked(60.0);
     let pkg = p.plan(&input(&road, &parked, xt, xb)).unwrap().clone();
     assert_eq!(pkg.mode, Mode::Chase);

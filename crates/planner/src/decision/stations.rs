@@ -182,7 +182,11 @@ impl Planner {
     /// (`self.xs`: the free prediction) would come within the obstacle clearance of an
     /// obstacle while the bullet is beside the target: from [`chase::BESIDE`] before its
     /// earliest arrival until the push it chases for is over (the window and
-    /// [`chase::FALL_BACK`] after the arrival, at most [`chase::LOOK`] ahead).
+    /// [`chase::FALL_BACK`] after the arrival, at most [`chase::LOOK`] ahead); or whether
+    /// the bullet would, on its way there until then (along the target by the package's
+    /// approach, across at its lateral speed): a stopped car in the bullet's lane that the
+    /// target passes before the bullet is beside it is still in the bullet's way. Called
+    /// after `fill_package`.
     pub(super) fn stand_off_blocked(&self, side: Side, input: &PlannerInput<'_>) -> bool {
         let s = &self.settings;
         let (t_arr, x_c) = self.earliest_arrival(side, input.road, &input.target, &input.bullet);
@@ -199,16 +203,35 @@ impl Planner {
             rel_heading: 0.0,
         };
         let from = (t_arr - chase::BESIDE).clamp(0.0, horizon);
-        path.blocked_at(&self.params, stand, (from, horizon), s.obstacle_clearance)
+        if path
+            .blocked_at(&self.params, stand, (from, horizon), s.obstacle_clearance)
+            .is_some()
+        {
+            return true;
+        }
+        // On its way there: along the target by the package's approach, across at its
+        // lateral speed.
+        let rel = crate::href::relative_position(&input.target, &input.bullet);
+        let (along, lat) = (self.package.approach, self.package.lateral_speed);
+        let route = |t: f64| chase::StandOff {
+            rel_pos: Vec2::new(
+                along.at(t).0,
+                rel.y + (stand.rel_pos.y - rel.y).clamp(-lat * t, lat * t),
+            ),
+            rel_heading: 0.0,
+        };
+        path.route_blocked_at(&self.params, route, (0.0, from), s.obstacle_clearance)
             .is_some()
     }
 
     /// Make the package's chase hold back behind the target: its approach goes to
-    /// [`crate::href::HOLD_BACK`] behind the contact station.
+    /// [`crate::href::HOLD_BACK`] behind the contact station, and it crosses to the
+    /// target's line at least at `crossing_speed` (an obstacle ahead is on its way).
     pub(super) fn hold_back(&mut self, input: &PlannerInput<'_>) {
         let s = &self.settings;
         let p = &mut self.package;
         p.hold_back = true;
+        p.lateral_speed = p.lateral_speed.max(s.crossing_speed);
         p.approach = Profile::with_brake_margin(
             crate::href::relative_position(&input.target, &input.bullet).x,
             crate::href::relative_velocity(&input.target, &input.bullet).x,
