@@ -1,10 +1,10 @@
 //! Whether the bullet may chase beside the target: its way to its stand-off pose beside the
 //! target's predicted path, and that pose until the push it is chasing for is over, must
 //! stay clear of the obstacles; otherwise it holds back behind the target (a car parked in
-//! the next lane that the target passes would be in its way). Road edges are not checked here: the side with no
-//! room beside the target is not chased on (`Planner`'s side choice), and holding back for
-//! an edge predicted seconds ahead on a curve was measured to cost more chases than it
-//! saved.
+//! the next lane that the target passes would be in its way). Road edges are not checked
+//! here: the side with no room beside the target is not chased on (`Planner`'s side
+//! choice), and holding back for an edge predicted seconds ahead on a curve was measured to
+//! cost more chases than it saved.
 //!
 //! The target's path is the planner's free rollout (no force, the look-ahead of N steps)
 //! and beyond it the last predicted state held: constant speed in the body frame and
