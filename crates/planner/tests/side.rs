@@ -1,5 +1,6 @@
 //! The side the push comes from: the inside of a curve, against a driverless target's drift on
-//! a straight, and the speed of a bullet crossing behind the target to its far side.
+//! a straight, else the roomier side of a straight, and the speed of a bullet crossing behind
+//! the target to its far side.
 
 mod common;
 
@@ -83,6 +84,37 @@ fn on_a_straight_the_push_works_against_the_targets_drift() {
     assert_eq!(plans(&mut p, [0.006; 2], 0.0, 3.5)[1], Side::Left);
     p.reset();
     assert_eq!(plans(&mut p, [0.006; 2], 0.0, 3.5)[1], Side::Right);
+}
+
+/// On a straight road, with no drift to work against, the bullet works on the side of the
+/// target with the more road beyond it: a rear-quarter push bends the spinning target's path
+/// towards the bullet's side. On a four-lane road (edges 8 m either side of the centre line)
+/// a target in the second lane from the left has 6.25 m of road on its left and 9.75 m on
+/// its right: a bullet starting on its left works on its right. Pushed from the middle
+/// lanes' shared line (the target in lane 2, the bullet on its right) the room differs by
+/// 3.5 m too; a target on the centre line keeps the bullet's own side.
+#[test]
+fn on_a_straight_the_push_comes_from_the_roomier_side() {
+    use mpc::reference::Side;
+    let road = Road::straight(3000.0, 4, 3.5, 1.0);
+    let side_for = |target_d: f64, ry: f64| {
+        let (mut xt, mut xb) = states(&road, -8.0, ry, 18.0, 20.0);
+        xt[7] = target_d;
+        xb[1] = target_d + ry;
+        let mut p = planner(PlannerSettings::default());
+        p.plan(&input(&road, &[], xt, xb)).unwrap().side
+    };
+    let left_lane = road.lane_center_offset(2);
+    assert!((left_lane - 1.75).abs() < 1e-12);
+    // Room on the right: the bullet crosses to it, from either side.
+    assert_eq!(side_for(left_lane, 3.5), Side::Right);
+    assert_eq!(side_for(left_lane, -3.5), Side::Right);
+    // And the mirror image.
+    assert_eq!(side_for(-left_lane, 3.5), Side::Left);
+    assert_eq!(side_for(-left_lane, -3.5), Side::Left);
+    // Half a metre off the centre line: too little difference, the bullet's own side.
+    assert_eq!(side_for(0.5, 3.5), Side::Left);
+    assert_eq!(side_for(0.5, -3.5), Side::Right);
 }
 
 /// The closed loop of the push: `push_done` says whether the target, left alone now, would

@@ -174,8 +174,9 @@ pub struct Planner {
     /// The current candidate's contact point along the target (body x, m).
     contact_x: f64,
     psi_rev: f64,
-    /// The inside of the curve the target is on or coming to, if the bullet has room
-    /// there ([`Planner::inside_side`]).
+    /// The side the bullet works on: the inside of the curve the target is on or coming
+    /// to, if the bullet has room there ([`Planner::curve_side`]); on a straight, against
+    /// a driverless target's drift, else the roomier side ([`Planner::roomier_side`]).
     inside: Option<Side>,
     /// The side against a driverless target's drift on a straight, decided once per
     /// maneuver ([`Planner::against_drift`]).

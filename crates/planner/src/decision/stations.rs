@@ -2,12 +2,12 @@
 //! quarter, where it touches, its earliest arrival at a station (the approach profile),
 //! which sides are open to it (room beside the target, obstacles along the stand-off pose,
 //! holding back), and which side it works on (the inside of a curve, against a driverless
-//! target's drift).
+//! target's drift, the roomier side of a straight).
 
 use super::*;
 
 /// Radius (m, full size) below which the road counts as a curve for the side choice
-/// ([`Planner::inside_side`]).
+/// ([`Planner::curve_side`]).
 const CURVE_RADIUS: f64 = 1000.0;
 
 /// How far ahead the side choice looks for a curve (s at the target's speed).
@@ -20,6 +20,10 @@ const DRIFT_MIN: f64 = 1.0;
 /// How long (s) the target's steer must stay as it was at the first plan for the planner
 /// to take it as held (a driver off the controls) and to work against its drift.
 const DRIFT_WATCH: f64 = 0.9;
+
+/// Difference (m, full size) between the road beyond the target on its two sides above
+/// which the bullet works on the roomier side of a straight ([`Planner::roomier_side`]).
+const ROOM_MIN: f64 = 3.0;
 
 /// The side choice against the target's own drift ([`Planner::against_drift`]): decided
 /// once per maneuver.
@@ -243,12 +247,12 @@ impl Planner {
     }
 
     /// On a curve, the side of the target towards the curve's centre, where the bullet
-    /// pushes from: its push turns the target's nose into the curve, so that its path
-    /// bends with the road while it spins (pushed from the outside, the nose turns out and
-    /// the spin carries it over the outer edge). The curve is the sharpest stretch of road
-    /// the target reaches within [`CURVE_LOOK`] at its speed; `None` on a straight (radius
-    /// beyond [`CURVE_RADIUS`]) or when the bullet has no room on that side.
-    pub(super) fn inside_side(&self, input: &PlannerInput<'_>) -> Option<Side> {
+    /// pushes from when it has room there: its push turns the target's nose into the
+    /// curve, so that its path bends with the road while it spins (pushed from the outside,
+    /// the nose turns out and the spin carries it over the outer edge). The curve is the
+    /// sharpest stretch of road the target reaches within [`CURVE_LOOK`] at its speed;
+    /// `None` on a straight (radius beyond [`CURVE_RADIUS`]).
+    pub(super) fn curve_side(&self, input: &PlannerInput<'_>) -> Option<Side> {
         let x = &input.target;
         let f = input.road.project(Vec2::new(x[idx::X], x[idx::Y]));
         let reach = x[idx::VX].hypot(x[idx::VY]) * CURVE_LOOK;
@@ -265,7 +269,22 @@ impl Planner {
         if kappa.abs() * CURVE_RADIUS * self.len_scale < 1.0 {
             return None;
         }
-        let side = if kappa > 0.0 { Side::Left } else { Side::Right };
+        Some(if kappa > 0.0 { Side::Left } else { Side::Right })
+    }
+
+    /// On a straight road, the side of the target with the more road beyond it, where the
+    /// target will be at the end of the free prediction (`self.xs`): a rear-quarter push
+    /// bends the spinning target's path towards the bullet's side, so the spin needs room
+    /// there. `None` when the two sides' room differs by less than [`ROOM_MIN`], or when
+    /// the bullet has no room beside the target on the roomier side.
+    pub(super) fn roomier_side(&self, input: &PlannerInput<'_>) -> Option<Side> {
+        let xn = &self.xs[self.n];
+        let d = input.road.project(Vec2::new(xn[idx::X], xn[idx::Y])).d;
+        // Room to the left edge is half_width − d, to the right half_width + d.
+        if d.abs() < 0.5 * ROOM_MIN * self.len_scale {
+            return None;
+        }
+        let side = if d < 0.0 { Side::Left } else { Side::Right };
         self.side_open(side, input).then_some(side)
     }
 
