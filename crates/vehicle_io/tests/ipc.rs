@@ -230,6 +230,11 @@ fn a_stall_of_the_states_makes_the_controller_fall_back_and_dropped_states_are_s
             "4",
             "--lockstep-timeout",
             "0.3",
+            // Shorter than the stall, so a controller that fell silent while the states
+            // stall would still trip it; longer than the 0.15 s default, so that a debug
+            // build's late answer on a loaded machine does not.
+            "--command-timeout",
+            "0.4",
         ],
         &[],
     );
