@@ -536,6 +536,11 @@ fn a_stand_off_line_blocked_ahead_holds_the_chase_back() {
     assert!(r.stages.iter().all(|st| st.rel_pos.y > 1.0));
 }
 
+/// The closed loop of the push: `push_done` says whether the target, left alone now, would
+/// reach the reversed heading inside the road. A target sliding on at 8 m/s with its body
+/// turned 90° does if it still spins at 1.5 rad/s, not without a spin (it stays across the
+/// road) nor spinning at 4 rad/s (it turns on past the reversed heading); the tolerance
+/// binds, and the package is left as it was.
 #[test]
 fn a_push_is_done_once_the_target_left_alone_reverses() {
     let road = road();

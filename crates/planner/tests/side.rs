@@ -117,11 +117,6 @@ fn on_a_straight_the_push_comes_from_the_roomier_side() {
     assert_eq!(side_for(0.5, -3.5), Side::Right);
 }
 
-/// The closed loop of the push: `push_done` says whether the target, left alone now, would
-/// reach the reversed heading inside the road. A target sliding on at 8 m/s with its body
-/// turned 90° does if it still spins at 1.5 rad/s, not without a spin (it stays across the
-/// road) nor spinning at 4 rad/s (it turns on past the reversed heading); the tolerance
-/// binds, and the package is left as it was.
 /// A bullet crossing behind the target to its far side crosses at `crossing_speed`, and as
 /// much faster as the target drifts across its line: with the target heading 5° across the
 /// road towards a bullet that holds the road's course at 17 m/s, at `crossing_speed` plus
