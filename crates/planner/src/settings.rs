@@ -161,6 +161,10 @@ pub struct PlannerSettings {
     /// Off at full size, where the target's own momentum completes the spin after a short
     /// push (`docs/planner.md`, "Half scale").
     pub push_round: bool,
+    /// τ (s) of the projected heading ψ_N + τ r_N of the terminal set from μ 0.6 up; on a
+    /// more slippery road the planner lengthens it by 0.6 / μ, at most to twice this
+    /// (`Planner`'s yaw decay: the spin left at the look-ahead's end dies away under the
+    /// tyres' friction moment, which scales with μ).
     pub yaw_decay: f64,
     /// Deceleration of the spun target for the post-PIT stopping point while its tyres slide
     /// sideways (fraction of μ g; rolling along its body it slows only by its rolling

@@ -576,6 +576,31 @@ fn a_push_is_done_once_the_target_left_alone_reverses() {
     );
 }
 
+/// On a slippery road the spin left at the end of the look-ahead turns the target further
+/// (the tyres' friction moment that stops it scales with μ): the projected heading's τ, which
+/// the package reports with its terminal set, is `yaw_decay` from μ 0.6 up, `yaw_decay` ·
+/// 0.6 / μ below, and at most twice `yaw_decay`.
+#[test]
+fn on_a_slippery_road_the_projected_heading_counts_more_of_the_spin() {
+    let road = road();
+    let s = PlannerSettings::default();
+    let (xt, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
+    let tau = |mu: f64| {
+        let mut p = planner(s.clone());
+        p.set_mu(mu);
+        p.plan(&input(&road, &[], xt, xb))
+            .unwrap()
+            .terminal
+            .yaw_decay
+    };
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+    assert!(close(tau(0.9), s.yaw_decay));
+    assert!(close(tau(0.6), s.yaw_decay));
+    assert!(close(tau(0.45), s.yaw_decay * 0.6 / 0.45));
+    assert!(close(tau(0.3), 2.0 * s.yaw_decay));
+    assert!(close(tau(0.2), 2.0 * s.yaw_decay));
+}
+
 /// The release does not wait for the stopping point: a target already reversed but for
 /// 0.12 rad, rolling backwards at 15 m/s, drifts 1.8 m/s across the road. Over the
 /// look-ahead it stays inside; rolling on with only its stalled driveline to slow it, its

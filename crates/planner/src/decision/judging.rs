@@ -46,7 +46,7 @@ impl Planner {
         self.linearise_rows(input.road, input.obstacles);
         let (_, _, road_margin, clearance, stop_margin) = self.merit(false);
         let heading_error =
-            projected_heading_error(&self.xs[self.n], self.settings.yaw_decay, self.psi_rev);
+            projected_heading_error(&self.xs[self.n], self.yaw_decay(), self.psi_rev);
         Ok(Judgement {
             heading_error,
             road_margin,

@@ -56,6 +56,11 @@ const ARRIVAL_TOL: f64 = 0.3;
 /// Most obstacles a package carries.
 pub const MAX_OBSTACLES: usize = 32;
 
+/// The friction coefficient at and above which the projected heading's τ is `yaw_decay`
+/// ([`Planner::yaw_decay`]). Measured: the 1/μ scaling from μ 0.9 down cost as many mid-μ
+/// scenes as it saved on low μ; from 0.6 down it pays (docs/planner.md, "Terminal set").
+pub(super) const YAW_DECAY_MU: f64 = 0.6;
+
 /// What the decision layer sees.
 #[derive(Debug, Clone, Copy)]
 pub struct PlannerInput<'a> {
@@ -346,6 +351,16 @@ impl Planner {
     /// Set the road friction μ (the stopping-distance model uses it).
     pub fn set_mu(&mut self, mu: f64) {
         self.mu = mu;
+    }
+
+    /// τ of the projected heading ψ_N + τ r_N: `yaw_decay` from μ = [`YAW_DECAY_MU`] up,
+    /// longer on a more slippery road. The target's yaw rate left at the end of the
+    /// look-ahead dies away under its tyres' friction moment, which scales with μ, so the
+    /// turn it still adds scales with 1/μ: τ = `yaw_decay` · [`YAW_DECAY_MU`] / μ, at least
+    /// `yaw_decay` and at most twice it (docs/planner.md, "Terminal set").
+    #[must_use]
+    pub(super) fn yaw_decay(&self) -> f64 {
+        self.settings.yaw_decay * (YAW_DECAY_MU / self.mu.max(1e-3)).clamp(1.0, 2.0)
     }
 
     /// The last package.

@@ -59,7 +59,7 @@ impl Planner {
         let w = &s.weights;
         let f = if use_trial { &self.trial } else { &self.forces };
         let xn = &self.xs[self.n];
-        let h = xn[idx::PSI] + s.yaw_decay * xn[idx::R] - self.psi_rev;
+        let h = xn[idx::PSI] + self.yaw_decay() * xn[idx::R] - self.psi_rev;
         let v2 = xn[idx::VX].powi(2) + xn[idx::VY].powi(2);
         let hi = s.corridor_fraction * self.force_max;
         let mut j = w.lambda_t * (w.heading * h * h + w.speed * v2);
@@ -153,7 +153,7 @@ impl Planner {
             objective: current.0 + delay,
             heading_error: projected_heading_error(
                 &self.xs[self.n],
-                self.settings.yaw_decay,
+                self.yaw_decay(),
                 self.psi_rev,
             ),
             road_margin: current.2,
@@ -212,6 +212,7 @@ impl Planner {
             forces: &self.forces,
             xn: &self.xs[self.n],
             psi_rev: self.psi_rev,
+            tau: self.yaw_decay(),
             sens: &self.sens,
             road_rows: &self.road_rows,
             obs_rows: &self.obs_rows,
@@ -240,6 +241,7 @@ impl Planner {
         self.rollout(Some(input.road), &input.target, false, false);
         self.linearise_rows(input.road, input.obstacles);
         let merit = self.merit(false);
+        let tau = self.yaw_decay();
         let s = &self.settings;
         let c = self.contact_pose(self.side);
         let lateral_speed =
@@ -275,7 +277,7 @@ impl Planner {
         p.terminal = TerminalSet {
             heading: self.psi_rev,
             heading_tol: s.heading_tol,
-            yaw_decay: s.yaw_decay,
+            yaw_decay: tau,
         };
         p.road_margin = s.road_margin;
         p.obstacle_clearance = s.obstacle_clearance;
@@ -307,8 +309,7 @@ impl Planner {
                 target: self.xs[k],
             });
         }
-        p.predicted_heading_error =
-            projected_heading_error(&self.xs[self.n], s.yaw_decay, self.psi_rev);
+        p.predicted_heading_error = projected_heading_error(&self.xs[self.n], tau, self.psi_rev);
         p.predicted_road_margin = merit.2;
         p.predicted_clearance = merit.3;
         p.predicted_stop_margin = merit.4;
@@ -327,6 +328,8 @@ pub(super) struct RowsView<'a> {
     forces: &'a [Vec2],
     xn: &'a TargetState,
     psi_rev: f64,
+    /// The yaw decay of the projected heading ([`Planner::yaw_decay`]).
+    tau: f64,
     sens: &'a [f64],
     road_rows: &'a [([f64; 3], f64)],
     obs_rows: &'a [([f64; 3], f64)],
@@ -373,6 +376,7 @@ impl DummyRows {
             forces: &self.forces,
             xn: &self.xn,
             psi_rev: 0.0,
+            tau: s.yaw_decay,
             sens: &self.sens,
             road_rows: &self.rows,
             obs_rows: &self.rows,
@@ -397,7 +401,7 @@ pub(super) fn assemble(
     q.fill(0.0);
     b.fill(0.0);
     // --- Objective. Terminal rows: projected heading, vx, vy (each a row g over y, value h).
-    let tau = s.yaw_decay;
+    let tau = v.tau;
     let h_psi = v.xn[idx::PSI] + tau * v.xn[idx::R] - v.psi_rev;
     let terms = [
         (w.lambda_t * w.heading, h_psi, 0usize),
