@@ -380,15 +380,15 @@ fn a_push_that_can_no_longer_reach_the_reversal_is_let_go() {
     assert!(b > a, "let go at {a} s, pressed on until {b} s");
 }
 
-/// Dataset scene `sc-01136` (straight urban road, μ 0.34, lane-keeping driver) with the
-/// PicoPINN in both layers: at its station beside the target the bullet finds no push that
-/// reverses the target inside the road. Swaying about the station, some plans find no
-/// window in the look-ahead at all (a chase plan); these do not reset the controller's
-/// patience, so it declares the decision infeasible instead of chasing until the time runs
-/// out.
+/// Dataset scene `sc-01337` (straight urban road, μ 0.47) with the PicoPINN in both
+/// layers: at its station beside the target the bullet finds no push that reverses the
+/// target inside the road. Swaying about the station, one plan finds no window in the
+/// look-ahead at all (a chase plan between the infeasible ones, at 4 s); it does not reset
+/// the controller's patience, so it declares the decision infeasible at 6 s instead of
+/// chasing until the time runs out.
 #[test]
 fn a_chase_that_finds_only_infeasible_pushes_is_given_up() {
-    let sc = &dataset_scene("sc-01136");
+    let sc = &dataset_scene("sc-01337");
     let mut cfg = config("picopinn");
     cfg.record = true;
     let r = run_episode(sc, &cfg, 0).unwrap();
