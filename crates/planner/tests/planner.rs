@@ -335,7 +335,8 @@ fn judging_a_plans_own_push_gives_its_verdict() {
 /// station already: the contact points the planner tries (`contact_offsets`, the rear
 /// quarter and 0.4 m behind it) form a band, and its earliest arrival is at the point of the
 /// band nearest to where it would come to rest. On a slippery road (μ 0.3, a slow relative
-/// approach) the same bullet 0.3 m behind commits; 1 m behind, beyond the band, it chases.
+/// approach) the same bullet 0.3 m behind commits; 2 m behind, beyond the band and the
+/// metre a waiting bullet may be off it, it chases.
 #[test]
 fn a_bullet_waiting_within_the_band_of_contact_points_commits() {
     let s = PlannerSettings::default();
@@ -356,7 +357,7 @@ fn a_bullet_waiting_within_the_band_of_contact_points_commits() {
         (0.0, 0.0),
     );
     let road = road();
-    for (behind, commits) in [(0.3, true), (1.0, false)] {
+    for (behind, commits) in [(0.3, true), (2.0, false)] {
         let (xt, xb) = states(
             &road,
             c.rel_pos.x - behind,
@@ -381,10 +382,11 @@ fn a_bullet_waiting_within_the_band_of_contact_points_commits() {
 }
 
 /// On a very slippery road (μ 0.15: the approach closes at 0.37 m/s²) a bullet waiting on
-/// the stand-off line a quarter of a metre off the band of contact stations, ahead of it or
-/// behind it, as the MPC holds a waiting bullet, has arrived: it commits. Closing those
-/// 0.25 m first would take 1.6 s and leave no window in the look-ahead. The same bullet
-/// drifting away from the band at 0.5 m/s is not waiting: it chases.
+/// the stand-off line up to a metre off the band of contact stations, ahead of it or behind
+/// it, as the MPC holds a waiting bullet (0.4 m ahead on a curve in `sc-01655`), has
+/// arrived: it commits. Closing 0.8 m first would take 2.9 s and leave no window in the
+/// look-ahead, plan after plan. The same bullet drifting away from the band at 0.5 m/s is
+/// not waiting: it chases.
 #[test]
 fn a_bullet_waiting_just_off_the_band_commits_on_a_slippery_road() {
     let s = PlannerSettings::default();
@@ -407,8 +409,8 @@ fn a_bullet_waiting_just_off_the_band_commits_on_a_slippery_road() {
     let (front, back) = (c.rel_pos.x, c.rel_pos.x - 0.4);
     let road = road();
     for (rx, drift, commits) in [
-        (back - 0.25, 0.0, true),
-        (front + 0.25, 0.0, true),
+        (back - 0.8, 0.0, true),
+        (front + 0.8, 0.0, true),
         (back - 0.25, -0.5, false),
         (front + 0.25, 0.5, false),
     ] {

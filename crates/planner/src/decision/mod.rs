@@ -50,9 +50,12 @@ const GRAVITY: f64 = 9.81;
 const FAR: f64 = 1.0e3;
 
 /// How far along the target (m, full size; × the length scale) from the band of contact
-/// stations, and how fast relative to it (m/s; × the square root of the length scale), a
-/// waiting bullet counts as arrived for the earliest arrival ([`Planner::plan`]'s windows).
-const ARRIVAL_TOL: f64 = 0.3;
+/// stations a waiting bullet counts as arrived for the earliest arrival
+/// ([`Planner::plan`]'s windows).
+const ARRIVAL_TOL: f64 = 1.0;
+/// How fast along the target (m/s, full size; × the square root of the length scale) a
+/// bullet may sway and still count as waiting.
+const WAITING_SPEED: f64 = 0.3;
 /// Most obstacles a package carries.
 pub const MAX_OBSTACLES: usize = 32;
 

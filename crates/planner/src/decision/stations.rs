@@ -106,14 +106,16 @@ impl Planner {
         let dy = (c.rel_pos.y - rel.y).abs();
         let k = self.len_scale;
         // A bullet waiting within `ARRIVAL_TOL` of the band (the MPC holds it a few tenths of
-        // a metre off its station, drifting at a few tenths of a metre per second) has
-        // arrived along the target once it stops: the turn-in closes the rest; at the
-        // approach's gentle acceleration on low adhesion, closing it first would take longer
-        // than the look-ahead leaves for a window. One still closing in has not.
+        // a metre off its station, swaying at a few tenths of a metre per second) has
+        // arrived along the target: the turn-in closes the rest. Neither closing that gap
+        // first nor stopping the sway is an approach: at the approach's gentle acceleration
+        // on low adhesion either would take longer than the look-ahead leaves for a window,
+        // plan after plan. One still closing in has not arrived.
         let tol = ARRIVAL_TOL * k;
         let (band_lo, band_hi) = (c.rel_pos.x + lo - x0 - tol, c.rel_pos.x + hi - x0 + tol);
-        let waiting = rel_vel.x.abs() < ARRIVAL_TOL * k.sqrt();
-        let goal_along = if waiting && (band_lo..=band_hi).contains(&rel.x) {
+        let waiting = rel_vel.x.abs() < WAITING_SPEED * k.sqrt();
+        let arrived = waiting && (band_lo..=band_hi).contains(&rel.x);
+        let goal_along = if arrived {
             stop.clamp(band_lo, band_hi)
         } else {
             goal
@@ -129,8 +131,10 @@ impl Planner {
                 - 0.5 * k;
             Profile::new(rel.x, rel_vel.x, behind.min(rel.x), a, cap).time()
                 + Profile::new(behind.min(rel.x), 0.0, goal_along, a, cap).time()
+        } else if arrived {
+            0.0
         } else {
-            Profile::new(rel.x, rel_vel.x, goal_along, a, cap).time()
+            Profile::new(rel.x, rel_vel.x, goal, a, cap).time()
         };
         let lateral = self.crossing_speed(side, road, xt, xb);
         (s.settle_time + along.max(dy / lateral), x_c)
