@@ -115,11 +115,6 @@ impl Planner {
         let (band_lo, band_hi) = (c.rel_pos.x + lo - x0 - tol, c.rel_pos.x + hi - x0 + tol);
         let waiting = rel_vel.x.abs() < WAITING_SPEED * k.sqrt();
         let arrived = waiting && (band_lo..=band_hi).contains(&rel.x);
-        let goal_along = if arrived {
-            stop.clamp(band_lo, band_hi)
-        } else {
-            goal
-        };
         if dx.hypot(dy) < 0.3 * k || self.gap(xt, xb) < 0.1 * k {
             // At the contact pose, or touching already: a PIT under way.
             return (0.0, x_c);
@@ -129,6 +124,12 @@ impl Planner {
             let behind = -(self.params.target.length - self.params.target.cg_to_front)
                 - self.params.bullet.cg_to_front
                 - 0.5 * k;
+            // Level with the band already: back to where it would have stopped, in the band.
+            let goal_along = if arrived {
+                stop.clamp(band_lo, band_hi)
+            } else {
+                goal
+            };
             Profile::new(rel.x, rel_vel.x, behind.min(rel.x), a, cap).time()
                 + Profile::new(behind.min(rel.x), 0.0, goal_along, a, cap).time()
         } else if arrived {
