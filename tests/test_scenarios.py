@@ -114,6 +114,27 @@ def test_generation_is_deterministic_for_a_seed():
     assert stages == 40
 
 
+def test_a_sample_the_format_refuses_is_rejected_not_fatal(monkeypatch):
+    """An obstacle sampled on top of the target at t = 0 is refused by the scenario format;
+    generation counts it as rejected and goes on."""
+    priors = S.load_priors(DATA / "priors.csv")
+    real = S.sample_scenario
+
+    def sample(prior, index, seed_seq):
+        s = real(prior, index, seed_seq)
+        if index == 2:
+            t = s["target"]
+            s["obstacles"] = [{"role": "roadside", "body": {"x": t["s"], "y": t["d"], "heading": 0.0, "vx": 0.0,
+                                                            "vy": 0.0, "length": 4.0, "width": 1.8}}]
+        return s
+
+    monkeypatch.setattr(S, "sample_scenario", sample)
+    res = S.generate(priors, S.GenerateConfig(n=6, keep=6, seed=3), progress=False)
+    assert res.counts["reasons"].get("rejected:invalid") == 1
+    assert res.screens[2]["verdict"] == "rejected" and "overlaps" in res.screens[2]["reason"]
+    assert all(s["id"] != res.generated[2]["id"] for s in res.retained)
+
+
 def test_the_shipped_dataset_regenerates_from_its_seed_in_part():
     """The first scenarios of a regeneration are the shipped ones (same priors, seed 0)."""
     priors = S.load_priors(DATA / "priors.csv")
@@ -163,8 +184,14 @@ def test_cli_refuses_a_bad_priors_file(tmp_path, capsys):
     assert "missing column" in capsys.readouterr().err
 
 
-def test_cli_small_run(tmp_path):
+def test_cli_small_run(tmp_path, monkeypatch):
+    """A small run on the main job's set-up, which has no torch."""
+    import sys
+
     from picopit.cli import main
+
+    monkeypatch.setitem(sys.modules, "torch", None)  # `import torch` raises ModuleNotFoundError
+    monkeypatch.delitem(sys.modules, "picopit.surrogate_nn", raising=False)
 
     assert main(["scenarios", "--n", "30", "--keep", "20", "--seed", "5", "--out", str(tmp_path),
                  "--no-progress", "--no-figures"]) == 0

@@ -391,8 +391,8 @@ def _command_line(argv: Optional[List[str]] = None) -> str:
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
+    from . import provenance
     from . import scenarios as sc
-    from .surrogate_nn import git_commit
 
     priors_path = Path(args.priors)
     check_dir(args.out, "--out")
@@ -404,7 +404,8 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     cfg = sc.GenerateConfig(n=args.n, keep=args.keep, seed=args.seed, workers=args.workers).validate()
     res = sc.generate(priors, cfg, progress=not args.no_progress)
     extra = {"seed": cfg.seed, "command": args.command_line, "priors": str(priors_path),
-             "priors_sha256": sc.sha256_file(priors_path), "git_commit": git_commit(),
+             "priors_sha256": sc.sha256_file(priors_path),
+             "git_commit": provenance.git_commit(ignore=("data",)),
              "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
     paths = sc.write_outputs(res, Path(args.out), extra, figures=not args.no_figures)
     c = res.counts

@@ -602,7 +602,13 @@ def generate(priors: Sequence[Prior], cfg: GenerateConfig, progress: bool = True
     screens: List[Dict[str, Any]] = [None] * len(lines)  # type: ignore[list-item]
 
     def work(i: int) -> Tuple[int, Dict[str, Any]]:
-        return i, _core.screen_scenario(lines[i])
+        try:
+            return i, _core.screen_scenario(lines[i])
+        except _core.ScenarioError as e:
+            # A sample the scenario format refuses (an obstacle on a vehicle at t = 0) is
+            # rejected like one the geometry rules refuse.
+            return i, {"verdict": "rejected", "reason": f"invalid: {e}", "t_fail": None, "t_stop": None,
+                       "t_reach": math.inf, "simulated": 0.0, "min_margin": math.nan}
 
     try:
         with ThreadPoolExecutor(max_workers=cfg.workers) as pool:
