@@ -135,6 +135,22 @@ def test_a_sample_the_format_refuses_is_rejected_not_fatal(monkeypatch):
     assert all(s["id"] != res.generated[2]["id"] for s in res.retained)
 
 
+def test_a_bullet_about_to_hit_an_obstacle_is_rejected():
+    """Holding its lane and speed, a bullet 2 m behind a car parked in its lane hits it in
+    about 0.1 s: no controller could have saved the scene, and the screen says so."""
+    scenes = [json.loads(line) for line in (DATA / "scenarios.jsonl").read_text().splitlines()]
+    good = next(s for s in scenes if "radius" not in s["road"] and abs(s["target"]["d"] - s["bullet"]["d"]) > 2.5)
+    b = good["bullet"]
+    good["obstacles"] = [{"role": "roadside", "body": {"x": b["s"] + 6.5, "y": b["d"], "heading": 0.0,
+                                                       "vx": 0.0, "vy": 0.0, "length": 4.0, "width": 1.8}}]
+    rep = picopit.screen_scenario(json.dumps(good))
+    assert rep["verdict"] == "rejected" and rep["reason"].startswith("bullet_blocked"), rep
+    # Parked 40 m ahead it is 2 s away: the bullet can steer round it, so this rule keeps it.
+    good["obstacles"][0]["body"]["x"] = b["s"] + 40.0
+    rep = picopit.screen_scenario(json.dumps(good))
+    assert not rep["reason"].startswith("bullet_blocked"), rep
+
+
 def test_the_shipped_dataset_regenerates_from_its_seed_in_part():
     """The first scenarios of a regeneration are the shipped ones (same priors, seed 0)."""
     priors = S.load_priors(DATA / "priors.csv")

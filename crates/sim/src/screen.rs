@@ -3,8 +3,10 @@
 //!
 //! Verdicts:
 //! * `rejected` (rule screening): an initial footprint outside the road or within
-//!   `clearance` of an obstacle, the vehicles overlapping, the bullet not behind the
-//!   target, or a vehicle too fast for the curve (`v² |κ| > 0.8 μ g`).
+//!   `clearance` of an obstacle, the bullet about to hit an obstacle (holding its lane and
+//!   speed it touches one within `bullet_escape` seconds: it can neither stop nor steer
+//!   round it), the vehicles overlapping, the bullet not behind the target, or a vehicle
+//!   too fast for the curve (`v² |κ| > 0.8 μ g`).
 //! * `trivial`: the target comes to rest by itself, inside the road and without touching
 //!   anything, within `T_max` — no PIT needed.
 //! * `impossible`: the target leaves the road or hits an obstacle before the bullet could
@@ -40,6 +42,11 @@ use serde::{Deserialize, Serialize};
 pub struct ScreenSettings {
     /// Smallest distance of an initial footprint to an obstacle (m).
     pub clearance: f64,
+    /// Time (s) within which the bullet, holding its lane and speed, must not touch an
+    /// obstacle: a car that starts this close to a crash cannot brake (it sheds
+    /// `μ g t` ≈ 4 m/s) nor steer a car width aside in it (`½ · 0.8 μ g t²` ≈ 1 m at μ 1,
+    /// before the steer actuator's lag), so no controller could have saved the scene.
+    pub bullet_escape: f64,
     /// Smallest initial distance between the two vehicles (m).
     pub vehicle_gap: f64,
     /// Largest overlap of the bullet's front past the target's rear bumper (m).
@@ -62,6 +69,7 @@ impl Default for ScreenSettings {
     fn default() -> Self {
         Self {
             clearance: 1.0,
+            bullet_escape: 0.5,
             vehicle_gap: 0.3,
             overlap: 0.5,
             curve_mu_share: 0.8,
@@ -165,6 +173,12 @@ pub fn rule_screen(
             }
         }
     }
+    if let Some((k, t)) = bullet_blocked(sc, pb, road, settings.bullet_escape) {
+        return Err(format!(
+            "bullet_blocked: holding its lane and speed the bullet touches obstacle {k} at {t:.2} s (needs {} s)",
+            settings.bullet_escape
+        ));
+    }
     let gap = obb_signed_distance(&fb, &ft);
     if gap < settings.vehicle_gap {
         return Err(format!("vehicles_overlap: {gap:.2} m apart"));
@@ -188,6 +202,30 @@ pub fn rule_screen(
         }
     }
     Ok(())
+}
+
+/// The first obstacle (index) and time (s) the bullet touches within `horizon` seconds
+/// when it holds its lane offset, heading and speed along the road (obstacles move on
+/// their own constant velocities), checked every 0.05 s.
+fn bullet_blocked(
+    sc: &Scenario,
+    pb: &dynamics::params::VehicleParams,
+    road: &Road,
+    horizon: f64,
+) -> Option<(usize, f64)> {
+    let steps = (horizon / 0.05).ceil() as usize;
+    for i in 1..=steps {
+        let t = (i as f64 * 0.05).min(horizon);
+        let mut moved = sc.bullet;
+        moved.s += sc.bullet.vx * t;
+        let fb = footprint(&moved.to_world(road), pb.length, pb.width, pb.cg_to_front);
+        for (k, o) in sc.obstacles.iter().enumerate() {
+            if obb_signed_distance(&fb, &o.body.footprint_at(t)) <= 0.0 {
+                return Some((k, t));
+            }
+        }
+    }
+    None
 }
 
 /// Screen a scenario: rules, then the target alone on the plant for up to `T_max`.
