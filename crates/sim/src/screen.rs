@@ -204,18 +204,22 @@ pub fn rule_screen(
     Ok(())
 }
 
+/// Observation step of the screening (s): the target-alone simulation's and the
+/// `bullet_blocked` rule's.
+const STEP: f64 = 0.05;
+
 /// The first obstacle (index) and time (s) the bullet touches within `horizon` seconds
 /// when it holds its lane offset, heading and speed along the road (obstacles move on
-/// their own constant velocities), checked every 0.05 s.
+/// their own constant velocities), checked every [`STEP`].
 fn bullet_blocked(
     sc: &Scenario,
     pb: &dynamics::params::VehicleParams,
     road: &Road,
     horizon: f64,
 ) -> Option<(usize, f64)> {
-    let steps = (horizon / 0.05).ceil() as usize;
+    let steps = (horizon / STEP).ceil() as usize;
     for i in 1..=steps {
-        let t = (i as f64 * 0.05).min(horizon);
+        let t = (i as f64 * STEP).min(horizon);
         let mut moved = sc.bullet;
         moved.s += sc.bullet.vx * t;
         let fb = footprint(&moved.to_world(road), pb.length, pb.width, pb.cg_to_front);
@@ -242,7 +246,7 @@ pub fn screen(sc: &Scenario, settings: &ScreenSettings) -> Result<ScreenReport, 
     let judge = JudgeSettings::for_params(sc.params);
     let mut plant = target_alone(sc, &params, &road)?;
     let mut driver = sc.target_driver(&params);
-    let dt = 0.05;
+    let dt = STEP;
     let steps_per = (dt / plant.dt()).round().max(1.0) as usize;
     let n = (sc.t_max / dt).ceil() as usize;
     // Station of the target at each observation (for the reach bound).
