@@ -97,3 +97,62 @@ def test_a_missing_run_or_column_is_named(tmp_path, capsys):
     (tmp_path / "bad.csv").write_text("config,scene,success\npicopinn,s0,true\n")
     assert cli.main(["compare", str(a), str(tmp_path / "bad.csv")]) == 2
     assert "no `scenario` column" in capsys.readouterr().err
+
+
+STAGE_FIELDS = ("config", "scenario", "success", "error", "contacts", "reversed_at", "decided_at")
+
+# (success, contacts, reversed_at, decided_at) of an episode ending in each stage.
+ENDS = {
+    "success": ("true", "1", "4.0", "7.0"),
+    "before_contact": ("false", "0", "", "3.0"),
+    "in_push": ("false", "1", "", "5.0"),
+    "after_reversal": ("false", "1", "4.5", "6.0"),
+    # Reversed only after the failure was decided: lost in the push (the funnel's rule).
+    "late_reversal": ("false", "1", "6.5", "6.0"),
+}
+
+
+def write_stage_run(folder: Path, ends) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / "episodes.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=STAGE_FIELDS)
+        w.writeheader()
+        for i, end in enumerate(ends):
+            ok, contacts, rev, dec = ENDS[end]
+            w.writerow({"config": "picopinn", "scenario": f"s{i}", "success": ok, "error": "",
+                        "contacts": contacts, "reversed_at": rev, "decided_at": dec})
+    return folder
+
+
+def test_the_scenes_that_moved_are_counted_by_the_stage_each_run_ended_them_in(tmp_path, capsys):
+    a = write_stage_run(tmp_path / "a", ["in_push", "in_push", "success", "before_contact",
+                                         "after_reversal", "late_reversal", "success"])
+    b = write_stage_run(tmp_path / "b", ["after_reversal", "after_reversal", "in_push", "success",
+                                         "after_reversal", "success", "success"])
+    out = tmp_path / "cmp.json"
+    assert cli.main(["compare", str(a), str(b), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "| picopinn | in push | after reversal | 2 |" in text
+    assert "| picopinn | success | in push | 1 |" in text
+    assert "| picopinn | before contact | success | 1 |" in text
+    # s5 reversed after its failure was decided: in the push in A.
+    assert "| picopinn | in push | success | 1 |" in text
+    # Unmoved scenes (s4 after reversal in both, s6 a success in both) are not rows.
+    assert "after reversal | after reversal" not in text and "success | success" not in text
+    moves = json.loads(out.read_text())["moves"]["picopinn"]
+    assert moves[0] == {"a": "in_push", "b": "after_reversal", "scenes": 2}
+    assert sum(m["scenes"] for m in moves) == 5
+
+
+def test_runs_without_the_funnel_columns_have_no_moves_and_a_bad_cell_is_named(tmp_path, capsys):
+    a = write_run(tmp_path / "a", [("picopinn", "s0", True)])
+    b = write_run(tmp_path / "b", [("picopinn", "s0", False)])
+    assert cli.main(["compare", str(a), str(b)]) == 0
+    assert "moved" not in capsys.readouterr().out
+    c = write_stage_run(tmp_path / "c", ["success"])
+    text = (c / "episodes.csv").read_text().replace(",4.0,", ",soon,")
+    (c / "episodes.csv").write_text(text)
+    d = write_stage_run(tmp_path / "d", ["in_push"])
+    assert cli.main(["compare", str(c), str(d)]) == 2
+    err = capsys.readouterr().err
+    assert "row 1: `reversed_at` is 'soon', not a number" in err and err.count("\n") == 1, err

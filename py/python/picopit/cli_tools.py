@@ -174,8 +174,10 @@ def _compare_parser(sub) -> None:
             "Pair the episodes of two picopit bench runs by configuration and scene id (the "
             "scenes both ran) and print, for every configuration both ran and pooled over them, "
             "the successes of each run, the scenes only one of them saved and the two-sided exact "
-            "McNemar p-value of that split. Run both with --clock simulated: a wall-clock run "
-            "repeats only as far as the machine's load allows."
+            "McNemar p-value of that split; where both runs have the funnel's columns, the "
+            "scenes whose outcome moved, counted by the stage each run ended them in (success, or "
+            "lost before contact, in the push or after reversal). Run both with --clock "
+            "simulated: a wall-clock run repeats only as far as the machine's load allows."
         ),
     )
     p.add_argument("run_a", metavar="A", help="a run folder (its episodes.parquet or .csv) or an episodes file")
@@ -197,9 +199,16 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         check_file(args.json, "--json")
     configs = _configs(args.configs, cmp.CompareError)
     fa, fb = cmp.episodes_file(Path(args.run_a)), cmp.episodes_file(Path(args.run_b))
-    rows = cmp.compare(cmp.read_episodes(fa), cmp.read_episodes(fb), configs)
+    ra, rb = cmp.read_rows(fa), cmp.read_rows(fb)
+    rows = cmp.compare(cmp.episodes_of(ra, fa), cmp.episodes_of(rb, fb), configs)
     print(cmp.markdown(rows, str(fa), str(fb)), end="")
-    _write_rows(args.json, "compare", {"a": str(fa), "b": str(fb)}, rows)
+    head: dict = {"a": str(fa), "b": str(fb)}
+    sa, sb = cmp.stages_of(ra, fa), cmp.stages_of(rb, fb)
+    if sa is not None and sb is not None:
+        moved = cmp.moves(sa, sb, [r.config for r in rows if r.config != "pooled"])
+        print(cmp.markdown_moves(moved), end="")
+        head["moves"] = {c: [{"a": x, "b": y, "scenes": n} for x, y, n in m] for c, m in moved.items()}
+    _write_rows(args.json, "compare", head, rows)
     return 0
 
 

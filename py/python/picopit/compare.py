@@ -7,19 +7,31 @@ successes of each run, the scenes only one of them saved and the two-sided exact
 p-value of that split; a pooled row sums the configurations (each pair of episodes is one
 trial). A split with p above ~0.05 is within what the scenes' luck makes of two equal
 controllers. Episodes with an ``error`` are left out of the pairing.
+
+Where both runs have the funnel's columns (``contacts``, ``reversed_at``, ``decided_at``, as
+``picopit bench`` writes them), the scenes whose outcome moved are also counted by the funnel
+stage they ended in under each run (success, or lost before contact, in the push or after
+reversal; :mod:`picopit.funnel`): a change that trades pushes gone wrong for reversed targets
+lost afterwards shows as such even when its successes are level.
 """
 
 from __future__ import annotations
 
 import csv
+import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 from .bench_summary import mcnemar_exact_p
+from .funnel import stage_lost
 
 #: Columns the comparison reads.
 COLUMNS = ("config", "scenario", "success")
+#: Columns the stage moves need besides ``COLUMNS`` (a run without them has no moves).
+STAGE_COLUMNS = ("contacts", "reversed_at", "decided_at")
+#: The stage an episode ended in, in the funnel's order.
+STAGES = ("success", "before_contact", "in_push", "after_reversal")
 
 
 class CompareError(ValueError):
@@ -110,6 +122,64 @@ def episodes_of(rows: Sequence[Mapping[str, object]], path: Path) -> Dict[Tuple[
             raise CompareError(f"{path}: row {i}: scene {key[1]} appears twice for {key[0]}")
         out[key] = _truth(r["success"], path, i)
     return out
+
+
+def _number(v: object, column: str, path: Path, line: int) -> Optional[float]:
+    """A CSV or Parquet cell as a number (``None`` when empty or null)."""
+    if v is None or (isinstance(v, str) and not v.strip()):
+        return None
+    try:
+        x = float(v)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise CompareError(f"{path}: row {line}: `{column}` is {v!r}, not a number") from None
+    return None if math.isnan(x) else x
+
+
+def stages_of(rows: Sequence[Mapping[str, object]], path: Path) -> Optional[Dict[Tuple[str, str], str]]:
+    """``{(config, scenario): stage}`` (one of :data:`STAGES`) of rows read from ``path``,
+    errored episodes left out; ``None`` when the rows lack :data:`STAGE_COLUMNS`."""
+    if rows and any(c not in rows[0] for c in STAGE_COLUMNS):
+        return None
+    out: Dict[Tuple[str, str], str] = {}
+    for i, r in enumerate(rows, start=1):
+        if r.get("error"):
+            continue
+        typed = {
+            "success": _truth(r["success"], path, i),
+            "contacts": _number(r["contacts"], "contacts", path, i) or 0,
+            "reversed_at": _number(r["reversed_at"], "reversed_at", path, i),
+            "decided_at": _number(r["decided_at"], "decided_at", path, i),
+        }
+        out[(str(r["config"]), str(r["scenario"]))] = stage_lost(typed) or "success"
+    return out
+
+
+def moves(a: Mapping[Tuple[str, str], str], b: Mapping[Tuple[str, str], str],
+          configs: Sequence[str]) -> Dict[str, List[Tuple[str, str, int]]]:
+    """Per configuration, the scenes both runs ran whose stage differs, counted by
+    ``(stage in A, stage in B)``, most frequent first."""
+    out: Dict[str, List[Tuple[str, str, int]]] = {}
+    for cfg in configs:
+        counts: Dict[Tuple[str, str], int] = {}
+        for (c, scene), sa in a.items():
+            sb = b.get((c, scene))
+            if c == cfg and sb is not None and sb != sa:
+                counts[(sa, sb)] = counts.get((sa, sb), 0) + 1
+        order = sorted(counts.items(), key=lambda kv: (-kv[1], STAGES.index(kv[0][0]), STAGES.index(kv[0][1])))
+        out[cfg] = [(sa, sb, n) for (sa, sb), n in order]
+    return out
+
+
+def markdown_moves(moved: Mapping[str, Sequence[Tuple[str, str, int]]]) -> str:
+    """The stage moves as a Markdown table (empty when no scene moved)."""
+    if not any(moved.values()):
+        return ""
+    lines = ["", "Scenes whose outcome moved, by the stage each run ended them in:", "",
+             "| config | A | B | scenes |", "|---|---|---|---|"]
+    for cfg, rows in moved.items():
+        for sa, sb, n in rows:
+            lines.append(f"| {cfg} | {sa.replace('_', ' ')} | {sb.replace('_', ' ')} | {n} |")
+    return "\n".join(lines) + "\n"
 
 
 def compare(a: Mapping[Tuple[str, str], bool], b: Mapping[Tuple[str, str], bool],
