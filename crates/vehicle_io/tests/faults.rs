@@ -212,12 +212,15 @@ fn a_paused_vehicle_catches_up_and_both_end_cleanly() {
             "{name}: {v}"
         );
         // The controller had the vehicle again after the pause: a safe stop it caused was
-        // released (one latched in the last 0.5 s, on a loaded machine, may still be on).
+        // released. The pause ends after about a second (it begins once ten 50 ms states are
+        // on disk and lasts at most 0.5 s); a later latch is a debug-build controller late on
+        // a loaded machine (CI: one at 1.975 s of 2.5, 0.525 s before the end, with 250 ms
+        // round trips), and one in the last second may still be on.
         let stop = &v["safe_stop"];
         assert!(
             stop.is_null()
                 || !stop["resumed_at"].is_null()
-                || f64_of(&stop["at"]) > f64_of(&v["time"]) - 0.5,
+                || f64_of(&stop["at"]) > f64_of(&v["time"]) - 1.0,
             "{name} ({pause:.2} s): {v}"
         );
     }
