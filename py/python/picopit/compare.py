@@ -19,19 +19,20 @@ from __future__ import annotations
 
 import csv
 import math
+from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 from .bench_summary import mcnemar_exact_p
-from .funnel import stage_lost
+from .funnel import LOSSES, stage_lost
 
 #: Columns the comparison reads.
 COLUMNS = ("config", "scenario", "success")
 #: Columns the stage moves need besides ``COLUMNS`` (a run without them has no moves).
 STAGE_COLUMNS = ("contacts", "reversed_at", "decided_at")
 #: The stage an episode ended in, in the funnel's order.
-STAGES = ("success", "before_contact", "in_push", "after_reversal")
+STAGES = ("success", *LOSSES)
 
 
 class CompareError(ValueError):
@@ -158,16 +159,15 @@ def moves(a: Mapping[Tuple[str, str], str], b: Mapping[Tuple[str, str], str],
           configs: Sequence[str]) -> Dict[str, List[Tuple[str, str, int]]]:
     """Per configuration, the scenes both runs ran whose stage differs, counted by
     ``(stage in A, stage in B)``, most frequent first."""
-    out: Dict[str, List[Tuple[str, str, int]]] = {}
-    for cfg in configs:
-        counts: Dict[Tuple[str, str], int] = {}
-        for (c, scene), sa in a.items():
-            sb = b.get((c, scene))
-            if c == cfg and sb is not None and sb != sa:
-                counts[(sa, sb)] = counts.get((sa, sb), 0) + 1
-        order = sorted(counts.items(), key=lambda kv: (-kv[1], STAGES.index(kv[0][0]), STAGES.index(kv[0][1])))
-        out[cfg] = [(sa, sb, n) for (sa, sb), n in order]
-    return out
+    counts: Dict[str, Counter] = {cfg: Counter() for cfg in configs}
+    for key, sa in a.items():
+        sb = b.get(key)
+        if key[0] in counts and sb is not None and sb != sa:
+            counts[key[0]][(sa, sb)] += 1
+    rank = {s: i for i, s in enumerate(STAGES)}
+    return {cfg: [(sa, sb, n) for (sa, sb), n in
+                  sorted(c.items(), key=lambda kv: (-kv[1], rank[kv[0][0]], rank[kv[0][1]]))]
+            for cfg, c in counts.items()}
 
 
 def markdown_moves(moved: Mapping[str, Sequence[Tuple[str, str, int]]]) -> str:
