@@ -282,6 +282,9 @@ impl PitController {
             window: (upper && pkg.has_window()).then_some(pkg.window),
             target_speed: input.target[idx::VX].hypot(input.target[idx::VY]),
             target_yaw_rate: input.target[idx::R],
+            target_turn: self
+                .pit_frame
+                .map_or(0.0, |f| wrap(input.target[idx::PSI] - f)),
             bullet_speed,
             bullet_yaw_rate: xb[5],
             bullet_slip: if xb[3].abs() > 0.5 {
@@ -292,8 +295,14 @@ impl PitController {
             bullet_clearance: clearance,
         };
         let mut changed = self.phases.update(&obs);
-        if changed && self.phases.phase() == Phase::Pit {
-            self.pit_frame = Some(input.target[idx::PSI]);
+        if changed {
+            // A push begins in the target's frame of the moment; a push tried again (back
+            // to chasing) begins in a new one.
+            match self.phases.phase() {
+                Phase::Pit => self.pit_frame = Some(input.target[idx::PSI]),
+                Phase::Chasing => self.pit_frame = None,
+                _ => {}
+            }
         }
         // The push has turned the target far enough: let go before the spinning body swings
         // back into the bullet (the next touch would be a rebound).
@@ -400,6 +409,7 @@ impl PitController {
                         dt,
                         pit_frame: self.pit_frame,
                         length_scale: crate::settings::length_scale(&self.params),
+                        back_off: self.phases.awaiting_apart(),
                     },
                 );
             } else {

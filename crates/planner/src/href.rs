@@ -32,13 +32,16 @@ pub fn relative_velocity(xt: &TargetState, xb: &BulletState) -> Vec2 {
 /// When the reference is for: the control step's time, the MPC's step, and the target's
 /// heading when the push began (the PIT phase's frame; `None` before it); and the
 /// vehicles' length scale (`crate::length_scale`: 1 at full size), which scales the
-/// reference's built-in lengths (and its fall-back speed by the square root).
+/// reference's built-in lengths (and its fall-back speed by the square root); and whether
+/// the bullet is to back off first (a push that did nothing, tried again: it falls back
+/// as in stabilisation until the vehicles are apart).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Timing {
     pub time: f64,
     pub dt: f64,
     pub pit_frame: Option<f64>,
     pub length_scale: f64,
+    pub back_off: bool,
 }
 
 /// Fill the MPC reference for the control step at `time` (stage k refers to
@@ -69,6 +72,7 @@ pub fn fill_reference(
         dt,
         pit_frame,
         length_scale: ls,
+        back_off,
     } = at;
     let rel = relative_position(xt, xb);
     let psi_now = xt[idx::PSI];
@@ -99,6 +103,12 @@ pub fn fill_reference(
     };
     let n = r.stages.len();
     let horizon_end = time + n as f64 * dt;
+    if back_off {
+        r.stages.iter_mut().for_each(|st| *st = back);
+        r.target_heading = pkg.terminal.heading;
+        r.target_weight = 0.0;
+        return;
+    }
     match pkg.mode {
         Mode::Pit => {
             let (t0, t1) = pkg.window;

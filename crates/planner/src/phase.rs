@@ -54,6 +54,8 @@ pub struct PhaseObservation {
     /// Target speed (m/s) and yaw rate (rad/s).
     pub target_speed: f64,
     pub target_yaw_rate: f64,
+    /// How far the target has turned since the push began (rad; 0 before it).
+    pub target_turn: f64,
     /// Bullet speed (m/s), yaw rate (rad/s), side slip (rad) and least obstacle clearance (m).
     pub bullet_speed: f64,
     pub bullet_yaw_rate: f64,
@@ -71,6 +73,13 @@ pub struct PhaseMachine {
     apart_since: Option<f64>,
     abort: Option<AbortReason>,
     push_round: bool,
+    /// Pushes that did nothing, tried again (`PhaseSettings::retries`).
+    retried: u32,
+    /// First touch of the current push.
+    touched_at: Option<f64>,
+    /// Chasing again after a push that did nothing: the next push begins only once the
+    /// vehicles have come apart.
+    await_apart: bool,
 }
 
 impl PhaseMachine {
@@ -84,6 +93,9 @@ impl PhaseMachine {
             apart_since: None,
             abort: None,
             push_round: false,
+            retried: 0,
+            touched_at: None,
+            await_apart: false,
         }
     }
 
@@ -103,6 +115,21 @@ impl PhaseMachine {
         self.contacted = false;
         self.apart_since = None;
         self.abort = None;
+        self.retried = 0;
+        self.touched_at = None;
+        self.await_apart = false;
+    }
+
+    /// Chasing again after a push that did nothing, the vehicles not yet apart.
+    #[must_use]
+    pub fn awaiting_apart(&self) -> bool {
+        self.phase == Phase::Chasing && self.await_apart
+    }
+
+    /// How many pushes that did nothing were tried again.
+    #[must_use]
+    pub fn retried(&self) -> u32 {
+        self.retried
     }
 
     #[must_use]
@@ -153,8 +180,9 @@ impl PhaseMachine {
         let s = &self.settings;
         let before = self.phase;
         let in_phase = o.time - self.entered;
-        if o.gap <= s.contact_gap {
+        if o.gap <= s.contact_gap && !(self.phase == Phase::Chasing && self.await_apart) {
             self.contacted = true;
+            self.touched_at.get_or_insert(o.time);
         }
         if self.phase.is_active() {
             let unstable = o.bullet_yaw_rate.abs() > s.bullet_yaw_rate_max
@@ -176,7 +204,10 @@ impl PhaseMachine {
             Phase::Chasing => {
                 // (An infeasible decision aborts through `abort`, after the controller's
                 // patience: the observation's mode alone does not.)
-                if o.gap <= s.contact_gap {
+                if o.gap > s.release_gap {
+                    self.await_apart = false;
+                }
+                if o.gap <= s.contact_gap && !self.await_apart {
                     self.enter(Phase::Pit, o.time);
                 } else if in_phase > s.chase_timeout {
                     self.abort(AbortReason::ChaseTimeout, o.time);
@@ -196,7 +227,22 @@ impl PhaseMachine {
                     .apart_since
                     .is_some_and(|t| o.time - t >= s.release_dwell - 1e-9);
                 let apart = released || (window_over && o.gap > s.contact_gap);
-                if (apart && !self.push_round) || in_phase > s.pit_timeout {
+                let idle = o.target_turn.abs() < s.retry_turn
+                    && o.target_yaw_rate.abs() < s.retry_yaw_rate;
+                // Stalled: `retry_after` since the first touch without turning the target
+                // (its rear tyres hold the push).
+                let stalled = self
+                    .touched_at
+                    .is_some_and(|t| o.time - t >= s.retry_after - 1e-9);
+                if (apart || stalled) && !self.push_round && idle && self.retried < s.retries {
+                    // The push did nothing: chase again for another one.
+                    self.retried += 1;
+                    self.contacted = false;
+                    self.apart_since = None;
+                    self.touched_at = None;
+                    self.await_apart = true;
+                    self.enter(Phase::Chasing, o.time);
+                } else if (apart && !self.push_round) || in_phase > s.pit_timeout {
                     self.enter(Phase::Stabilising, o.time);
                 }
             }
@@ -226,6 +272,8 @@ mod tests {
             window: Some((1.0, 1.6)),
             target_speed: 15.0,
             target_yaw_rate: 0.0,
+            // The push has turned the target (a push that did nothing is tried again).
+            target_turn: 1.0,
             bullet_speed: 16.0,
             bullet_yaw_rate: 0.0,
             bullet_slip: 0.0,
@@ -254,6 +302,74 @@ mod tests {
         assert!(m.update(&o));
         assert_eq!(m.phase(), Phase::Done);
         assert_eq!(m.abort_reason(), None);
+    }
+
+    /// A push that did nothing (the target not turned, not yawing) goes back to chasing,
+    /// once: after a brush that came apart, or after `retry_after` of contact (the rear
+    /// tyres held); the next push begins only once the vehicles have been apart.
+    #[test]
+    fn a_push_that_did_nothing_is_tried_again_once() {
+        let s = PhaseSettings::default();
+        let idle = |t, gap| PhaseObservation {
+            target_turn: 0.0,
+            ..obs(t, gap)
+        };
+        let mut m = PhaseMachine::new(s.clone());
+        m.reset(0.0);
+        assert!(m.update(&idle(1.0, 0.0)));
+        m.update(&idle(1.05, 0.8));
+        assert!(m.update(&idle(1.05 + s.release_dwell, 0.8)));
+        assert_eq!(m.phase(), Phase::Chasing);
+        assert_eq!(m.retried(), 1);
+        assert!(!m.contacted());
+        // The second push (once apart); it does nothing either, and there is no third.
+        assert!(!m.update(&idle(1.5, 0.8)));
+        assert!(m.update(&idle(2.0, 0.0)));
+        assert_eq!(m.phase(), Phase::Pit);
+        m.update(&idle(2.05, 0.8));
+        m.update(&idle(2.05 + s.release_dwell, 0.8));
+        assert_eq!(m.phase(), Phase::Stabilising);
+        assert_eq!(m.retried(), 1);
+
+        // Stalled in contact: back to chasing after `retry_after`, backing off (no new push
+        // while still touching) until apart.
+        let mut m = PhaseMachine::new(s.clone());
+        m.reset(0.0);
+        m.update(&idle(1.0, 0.0));
+        assert!(!m.update(&idle(1.0 + s.retry_after - 0.05, -0.01)));
+        assert!(m.update(&idle(1.0 + s.retry_after, -0.01)));
+        assert_eq!(m.phase(), Phase::Chasing);
+        assert!(m.awaiting_apart());
+        assert!(!m.update(&idle(1.7, 0.0)), "still touching: no new push");
+        assert!(!m.update(&idle(1.8, s.release_gap + 0.1)));
+        assert!(!m.awaiting_apart());
+        assert!(m.update(&idle(2.5, 0.0)));
+        assert_eq!(m.phase(), Phase::Pit);
+
+        // A push that turned the target, or set it yawing, is not tried again.
+        for (turn, rate) in [(s.retry_turn + 0.05, 0.0), (0.0, s.retry_yaw_rate + 0.1)] {
+            let mut m = PhaseMachine::new(s.clone());
+            m.reset(0.0);
+            m.update(&idle(1.0, 0.0));
+            let mut o = idle(1.05, 0.8);
+            o.target_turn = turn;
+            o.target_yaw_rate = rate;
+            m.update(&o);
+            o.time = 1.05 + s.release_dwell;
+            assert!(m.update(&o));
+            assert_eq!(m.phase(), Phase::Stabilising, "turn {turn}, rate {rate}");
+        }
+        // Nor without retries, nor a push round.
+        let none = PhaseSettings {
+            retries: 0,
+            ..s.clone()
+        };
+        let mut m = PhaseMachine::new(none);
+        m.reset(0.0);
+        m.update(&idle(1.0, 0.0));
+        m.update(&idle(1.05, 0.8));
+        m.update(&idle(1.05 + s.release_dwell, 0.8));
+        assert_eq!(m.phase(), Phase::Stabilising);
     }
 
     /// A push that turns the target round goes on when the bullet and the target come

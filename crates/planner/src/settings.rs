@@ -435,6 +435,19 @@ pub struct PhaseSettings {
     /// that finds a push ends the count; a chase plan (no window fits the look-ahead yet)
     /// neither counts nor ends it.
     pub infeasible_patience: u32,
+    /// A push that did nothing is tried again: when the bullet comes apart from the target
+    /// (or the window ends) with the target turned less than `retry_turn` (rad) since the
+    /// push began and yawing slower than `retry_yaw_rate` (rad/s), the maneuver goes back
+    /// to chasing instead of stabilising, at most `retries` times. A brush of the rear
+    /// bumper while the bullet moves across behind the target, or a push whose
+    /// rear tyres held, leaves a target that carries on as before, which a driver would
+    /// PIT again.
+    pub retries: u32,
+    pub retry_turn: f64,
+    pub retry_yaw_rate: f64,
+    /// The same `retry_after` (s) after the push's first touch, in contact or not, if the
+    /// target has not turned by then (its rear tyres held the push).
+    pub retry_after: f64,
 }
 
 impl Default for PhaseSettings {
@@ -457,6 +470,10 @@ impl Default for PhaseSettings {
             bullet_clearance_min: 0.2,
             abort_brake: 1.0,
             infeasible_patience: 3,
+            retries: 1,
+            retry_turn: 0.15,
+            retry_yaw_rate: 0.3,
+            retry_after: 1.2,
         }
     }
 }
@@ -479,6 +496,7 @@ impl PhaseSettings {
             ("phases.bullet_yaw_rate_max", self.bullet_yaw_rate_max),
             ("phases.bullet_slip_max", self.bullet_slip_max),
             ("phases.abort_brake", self.abort_brake),
+            ("phases.retry_after", self.retry_after),
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -491,6 +509,8 @@ impl PhaseSettings {
             ("phases.bullet_clearance_min", self.bullet_clearance_min),
             ("phases.let_go_turn", self.let_go_turn),
             ("phases.release_heading_tol", self.release_heading_tol),
+            ("phases.retry_turn", self.retry_turn),
+            ("phases.retry_yaw_rate", self.retry_yaw_rate),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(name, format!("must be finite and >= 0 (got {v})")));

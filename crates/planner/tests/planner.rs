@@ -519,6 +519,7 @@ fn a_stand_off_line_blocked_ahead_holds_the_chase_back() {
         dt: 0.05,
         pit_frame: None,
         length_scale: 1.0,
+        back_off: false,
     };
     let behind = pkg.contact_rel_pos.x - HOLD_BACK;
     let mut r = mpc::Reference::new(20);
@@ -658,6 +659,7 @@ fn a_push_round_follows_the_rear_quarter_and_is_not_ended_by_the_prediction() {
         dt: 0.05,
         pit_frame: Some(psi0),
         length_scale: 1.0,
+        back_off: false,
     };
     let (cp, rel0) = (pkg.contact_point, pkg.contact_rel_pos);
     let mut r = mpc::Reference::new(20);

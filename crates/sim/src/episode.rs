@@ -473,6 +473,9 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
                 _ => {}
             }
         }
+        if prev_phase == Phase::Pit && phase == Phase::Chasing {
+            vehicle.push_retried(t);
+        }
         if phase == Phase::Stabilising && !stabilising_reported {
             stabilising_reported = true;
             vehicle.enter_stabilisation(t);

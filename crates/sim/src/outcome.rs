@@ -106,6 +106,11 @@ pub struct JudgeSettings {
     pub rebound_speed: f64,
     /// Time apart after which a new touch starts a new contact episode (s).
     pub separation_time: f64,
+    /// A push tried again ([`Monitor::push_retried`]) starts a new first contact only while
+    /// the target has turned less than `retry_turn` (rad) since the first touch and yaws
+    /// slower than `retry_yaw_rate` (rad/s): a target the first contact did not spin.
+    pub retry_turn: f64,
+    pub retry_yaw_rate: f64,
 }
 
 impl Default for JudgeSettings {
@@ -134,6 +139,8 @@ impl JudgeSettings {
             dwell: 0.5,
             rebound_speed: 1.0,
             separation_time: 0.3,
+            retry_turn: 0.3,
+            retry_yaw_rate: 0.5,
         }
     }
 
@@ -147,6 +154,8 @@ impl JudgeSettings {
             dwell: 0.5,
             rebound_speed: 0.3,
             separation_time: 0.3,
+            retry_turn: 0.3,
+            retry_yaw_rate: 0.5,
         }
     }
 
@@ -167,6 +176,8 @@ impl JudgeSettings {
             ("dwell", self.dwell),
             ("rebound_speed", self.rebound_speed),
             ("separation_time", self.separation_time),
+            ("retry_turn", self.retry_turn),
+            ("retry_yaw_rate", self.retry_yaw_rate),
         ] {
             if !(value.is_finite() && value > 0.0) {
                 return Err(JudgeError {
@@ -278,6 +289,8 @@ struct ContactTracker {
     episodes: u32,
     /// End of the first episode (first sample `separation_time` after its last touch).
     first_ended: Option<f64>,
+    /// Episodes before the current push's first (a push tried again starts anew).
+    attempt_start: u32,
     /// A new episode (after the first) began in stabilisation with a high closing speed.
     unsafe_at: Option<f64>,
 }
@@ -296,7 +309,7 @@ impl ContactTracker {
                 .last_touch
                 .is_none_or(|t0| t - t0 >= settings.separation_time);
             if new_episode {
-                if self.episodes >= 1 && self.first_ended.is_none() {
+                if self.episodes > self.attempt_start && self.first_ended.is_none() {
                     self.first_ended = self.last_touch.map(|t0| t0 + settings.separation_time);
                 }
                 self.episodes += 1;
@@ -308,13 +321,21 @@ impl ContactTracker {
                 }
             }
             self.last_touch = Some(t);
-        } else if self.first_ended.is_none() && self.episodes == 1 {
+        } else if self.first_ended.is_none() && self.episodes == self.attempt_start + 1 {
             if let Some(t0) = self.last_touch {
                 if t - t0 >= settings.separation_time {
                     self.first_ended = Some(t);
                 }
             }
         }
+    }
+}
+
+impl ContactTracker {
+    /// The next contact episode is the first of a new push.
+    fn restart(&mut self) {
+        self.attempt_start = self.episodes;
+        self.first_ended = None;
     }
 }
 
@@ -331,6 +352,10 @@ pub struct Monitor {
     /// Start of the current run of observations with the heading within ε_ψ.
     reversed_since: Option<f64>,
     stabilising_since: Option<f64>,
+    /// The target's heading at the first touch, and its heading and yaw rate at the last
+    /// observation (for [`Monitor::push_retried`]).
+    first_touch_heading: Option<f64>,
+    last_heading_rate: (f64, f64),
     contacts: ContactTracker,
     latched: bool,
     latched_obstacle: [bool; 2],
@@ -370,6 +395,8 @@ impl Monitor {
             settled_since: None,
             reversed_since: None,
             stabilising_since: None,
+            first_touch_heading: None,
+            last_heading_rate: (0.0, 0.0),
             contacts: ContactTracker::default(),
             latched: false,
             latched_obstacle: [false; 2],
@@ -483,6 +510,24 @@ impl Monitor {
         }
     }
 
+    /// The controller went back to chasing at `time` for another push, the first having
+    /// done nothing: the next contact is judged as a first contact, not as a rebound,
+    /// provided the target is still unspun (turned less than `retry_turn` since the first
+    /// touch and yawing slower than `retry_yaw_rate` at the last observation). Ignored once
+    /// the controller has entered stabilisation. Returns whether it was taken.
+    pub fn push_retried(&mut self, _time: f64) -> bool {
+        let (psi, r) = self.last_heading_rate;
+        let unspun = self
+            .first_touch_heading
+            .is_some_and(|p0| wrap_angle(psi - p0).abs() < self.settings.retry_turn)
+            && r.abs() < self.settings.retry_yaw_rate;
+        let take = unspun && self.stabilising_since.is_none() && self.outcome.is_none();
+        if take {
+            self.contacts.restart();
+        }
+        take
+    }
+
     /// Record the plant's contacts of its last step (call after every plant step, or not
     /// at all). Closing speed is taken at the contact point along the contact normal.
     pub fn latch(&mut self, plant: &Plant) {
@@ -511,6 +556,7 @@ impl Monitor {
         if self.metrics.impact_speed.is_none() {
             let (b, t) = (plant.body(Which::Bullet), plant.body(Which::Target));
             self.metrics.contact_at = Some(plant.time());
+            self.first_touch_heading = Some(t.yaw);
             self.metrics.impact_speed = Some((b.vel - t.vel).norm());
             self.metrics.impact_angle = Some(wrap_angle(b.yaw - t.yaw).abs());
             self.metrics.impact_point = plant
@@ -547,6 +593,10 @@ impl Monitor {
         }
         let t = obs.time;
         self.metrics.observations += 1;
+        self.last_heading_rate = (obs.target[2], obs.target[3]);
+        if obs.vehicle_contact && self.first_touch_heading.is_none() {
+            self.first_touch_heading = Some(obs.target[2]);
+        }
         if !self.latched {
             self.contacts.sample(
                 t,

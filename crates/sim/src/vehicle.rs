@@ -313,6 +313,12 @@ impl SimVehicle {
         self.monitor.enter_stabilisation(time);
     }
 
+    /// Tell the judge the controller went back to chasing at `time` for another push
+    /// ([`crate::outcome::Monitor::push_retried`]); returns whether the judge took it.
+    pub fn push_retried(&mut self, time: f64) -> bool {
+        self.monitor.push_retried(time)
+    }
+
     /// Tell the judge the controller found no feasible decision at `time`.
     pub fn decision_infeasible(&mut self, time: f64) -> Status {
         self.status = self.monitor.decision_infeasible(time);

@@ -2,6 +2,7 @@
 //! determinism on the simulated clock, uncertainty, and configuration errors that name
 //! the field. Debug builds run the QPs ~20x slower: the episodes here are short.
 
+use planner::Phase;
 use sim::episode::{run_episode, ClockKind, EpisodeConfig, EpisodeError, ModelKind};
 use sim::{FailureCause, Scenario};
 use std::path::PathBuf;
@@ -408,5 +409,29 @@ fn a_chase_that_finds_only_infeasible_pushes_is_given_up() {
         r.metrics.decided_at.is_some_and(|t| t < 9.0),
         "{:?}",
         r.metrics
+    );
+}
+
+/// `sc-00008` (straight highway, dry, a lane-keeping target at 19.5 m/s): the bullet,
+/// crossing behind the target to its left, brushes the rear bumper (4 kN for 0.1 s) and the
+/// target carries on unturned; the maneuver goes back to chasing, the bullet comes
+/// alongside, and the second push turns the target round. The second contact is a push of
+/// its own, not a rebound.
+#[test]
+fn a_push_that_did_nothing_is_tried_again() {
+    let sc = &dataset_scene("sc-00008");
+    let mut cfg = config("picopinn");
+    cfg.record = true;
+    let r = run_episode(sc, &cfg, 0).unwrap();
+    assert!(r.metrics.success, "{:?}", r.metrics);
+    assert_eq!(r.metrics.contacts, 2, "{:?}", r.metrics);
+    let phases: Vec<_> = r.trajectory.iter().map(|s| s.phase).collect();
+    let back = phases
+        .windows(2)
+        .position(|w| w[0] == Phase::Pit && w[1] == Phase::Chasing)
+        .expect("a push tried again");
+    assert!(
+        phases[back..].contains(&Phase::Pit),
+        "a second push after the retry"
     );
 }

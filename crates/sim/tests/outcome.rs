@@ -368,6 +368,103 @@ fn a_hard_recontact_in_stabilisation_is_an_unsafe_rebound() {
     assert_eq!(m.metrics().contacts, 3);
 }
 
+/// A target going straight at 8 m/s, not turning; the bullet touching it as given.
+fn unspun(t: f64, touching: bool, closing: f64) -> Observation {
+    let mut o = obs(t, 50.0 + 8.0 * t, 0.0, 0.0, 8.0, 0.0);
+    o.vehicle_contact = touching;
+    o.closing_speed = closing;
+    o
+}
+
+/// Observe `f` from step 1 to step `to` (inclusive), expecting no decision.
+fn run_to(m: &mut Monitor, from: usize, to: usize, f: impl Fn(f64) -> Observation) {
+    for k in from..=to {
+        assert!(
+            matches!(m.observe(&f(k as f64 * DT)), Status::Running),
+            "decided at {} s",
+            k as f64 * DT
+        );
+    }
+}
+
+#[test]
+fn a_push_tried_again_on_an_unspun_target_is_a_first_contact() {
+    // A brush at 1.0–1.1 s that does not turn the target; a second push at 2.5 s at 3 m/s.
+    let touching = |t: f64| (1.0..1.1).contains(&t) || (2.5..2.9).contains(&t);
+    let f = |t: f64| unspun(t, touching(t), 3.0);
+    // Without a word from the controller the second push is a rebound (the first contact
+    // episode has ended).
+    let mut m = monitor(vec![]);
+    let o = run_until_done(&mut m, f);
+    assert!(
+        matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 2.5).abs() < 1e-9),
+        "{o:?}"
+    );
+    // The controller went back to chasing at 1.5 s: the second push is a first contact.
+    let mut m = monitor(vec![]);
+    run_to(&mut m, 1, 30, f);
+    assert!(m.push_retried(1.5));
+    let o = run_until_done(&mut m, |t| f(t + 1.5));
+    assert!(
+        matches!(
+            o,
+            Outcome::Failure {
+                cause: FailureCause::NoTermination,
+                ..
+            }
+        ),
+        "{o:?}"
+    );
+    assert_eq!(m.metrics().contacts, 2);
+    // A third hard contact after the second push has ended is a rebound again.
+    let mut m = monitor(vec![]);
+    run_to(&mut m, 1, 30, f);
+    assert!(m.push_retried(1.5));
+    let third = |t: f64| {
+        let on = touching(t) || (3.5..3.6).contains(&t);
+        unspun(t, on, 3.0)
+    };
+    let o = run_until_done(&mut m, |t| third(t + 1.5));
+    assert!(
+        matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 3.5).abs() < 1e-9),
+        "{o:?}"
+    );
+}
+
+#[test]
+fn a_push_tried_again_is_refused_once_the_target_spins_or_stabilisation_began() {
+    // The first contact set the target yawing at 0.6 rad/s: a retry would hide a rebound.
+    let mut m = monitor(vec![]);
+    run_to(&mut m, 1, 30, |t| {
+        let mut o = unspun(t, (1.0..1.1).contains(&t), 3.0);
+        if t >= 1.1 {
+            o.target[3] = 0.6;
+            o.target[2] = 0.6 * (t - 1.1);
+        }
+        o
+    });
+    assert!(!m.push_retried(1.5));
+    // Turned 0.4 rad (past `retry_turn`) though no longer yawing.
+    let mut m = monitor(vec![]);
+    run_to(&mut m, 1, 30, |t| {
+        let mut o = unspun(t, (1.0..1.1).contains(&t), 3.0);
+        if t >= 1.2 {
+            o.target[2] = 0.4;
+        }
+        o
+    });
+    assert!(!m.push_retried(1.5));
+    // No contact yet: nothing to try again.
+    let mut m = monitor(vec![]);
+    run_to(&mut m, 1, 30, |t| unspun(t, false, 0.0));
+    assert!(!m.push_retried(1.5));
+    // In stabilisation.
+    let mut m = monitor(vec![]);
+    run_to(&mut m, 1, 30, |t| unspun(t, (1.0..1.1).contains(&t), 3.0));
+    m.enter_stabilisation(1.4);
+    assert!(!m.push_retried(1.5));
+}
+
 #[test]
 fn bad_settings_are_refused() {
     let mut s = JudgeSettings::full_size();

@@ -349,6 +349,9 @@ impl ControlLoop {
         {
             status.events |= event::DECISION_INFEASIBLE;
         }
+        if prev_phase == Phase::Pit && out.phase == Phase::Chasing {
+            status.events |= event::PUSH_RETRIED;
+        }
         status.phase = phase_code(out.phase);
         status.mpc_status = mpc_code(out.mpc_status);
         status.ctrl_ns = secs_to_ns(out.ctrl_time);

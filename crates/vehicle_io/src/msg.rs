@@ -142,6 +142,8 @@ pub mod event {
     pub const STABILISING: u32 = 1 << 0;
     /// The upper layer found no feasible decision while chasing and aborted this step.
     pub const DECISION_INFEASIBLE: u32 = 1 << 1;
+    /// The push did nothing and the maneuver went back to chasing for another this step.
+    pub const PUSH_RETRIED: u32 = 1 << 2;
 }
 
 /// The controller's status, published with every command.

@@ -189,6 +189,9 @@ impl VehicleBridge for SimBridge {
 
     fn controller_events(&mut self, events: u32) {
         let t = self.sim.time();
+        if events & crate::msg::event::PUSH_RETRIED != 0 {
+            self.sim.push_retried(t);
+        }
         if events & crate::msg::event::STABILISING != 0 {
             self.sim.enter_stabilisation(t);
         }
