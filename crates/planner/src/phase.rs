@@ -180,7 +180,7 @@ impl PhaseMachine {
         let s = &self.settings;
         let before = self.phase;
         let in_phase = o.time - self.entered;
-        if o.gap <= s.contact_gap && !(self.phase == Phase::Chasing && self.await_apart) {
+        if o.gap <= s.contact_gap && !self.awaiting_apart() {
             self.contacted = true;
             self.touched_at.get_or_insert(o.time);
         }

@@ -474,7 +474,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
             }
         }
         if prev_phase == Phase::Pit && phase == Phase::Chasing {
-            vehicle.push_retried(t);
+            vehicle.push_retried();
         }
         if phase == Phase::Stabilising && !stabilising_reported {
             stabilising_reported = true;

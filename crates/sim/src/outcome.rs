@@ -510,12 +510,12 @@ impl Monitor {
         }
     }
 
-    /// The controller went back to chasing at `time` for another push, the first having
+    /// The controller went back to chasing for another push, the first having
     /// done nothing: the next contact is judged as a first contact, not as a rebound,
     /// provided the target is still unspun (turned less than `retry_turn` since the first
     /// touch and yawing slower than `retry_yaw_rate` at the last observation). Ignored once
     /// the controller has entered stabilisation. Returns whether it was taken.
-    pub fn push_retried(&mut self, _time: f64) -> bool {
+    pub fn push_retried(&mut self) -> bool {
         let (psi, r) = self.last_heading_rate;
         let unspun = self
             .first_touch_heading

@@ -313,10 +313,10 @@ impl SimVehicle {
         self.monitor.enter_stabilisation(time);
     }
 
-    /// Tell the judge the controller went back to chasing at `time` for another push
+    /// Tell the judge the controller went back to chasing for another push
     /// ([`crate::outcome::Monitor::push_retried`]); returns whether the judge took it.
-    pub fn push_retried(&mut self, time: f64) -> bool {
-        self.monitor.push_retried(time)
+    pub fn push_retried(&mut self) -> bool {
+        self.monitor.push_retried()
     }
 
     /// Tell the judge the controller found no feasible decision at `time`.

@@ -403,7 +403,7 @@ fn a_push_tried_again_on_an_unspun_target_is_a_first_contact() {
     // The controller went back to chasing at 1.5 s: the second push is a first contact.
     let mut m = monitor(vec![]);
     run_to(&mut m, 1, 30, f);
-    assert!(m.push_retried(1.5));
+    assert!(m.push_retried());
     let o = run_until_done(&mut m, |t| f(t + 1.5));
     assert!(
         matches!(
@@ -419,7 +419,7 @@ fn a_push_tried_again_on_an_unspun_target_is_a_first_contact() {
     // A third hard contact after the second push has ended is a rebound again.
     let mut m = monitor(vec![]);
     run_to(&mut m, 1, 30, f);
-    assert!(m.push_retried(1.5));
+    assert!(m.push_retried());
     let third = |t: f64| {
         let on = touching(t) || (3.5..3.6).contains(&t);
         unspun(t, on, 3.0)
@@ -443,7 +443,7 @@ fn a_push_tried_again_is_refused_once_the_target_spins_or_stabilisation_began() 
         }
         o
     });
-    assert!(!m.push_retried(1.5));
+    assert!(!m.push_retried());
     // Turned 0.4 rad (past `retry_turn`) though no longer yawing.
     let mut m = monitor(vec![]);
     run_to(&mut m, 1, 30, |t| {
@@ -453,16 +453,16 @@ fn a_push_tried_again_is_refused_once_the_target_spins_or_stabilisation_began() 
         }
         o
     });
-    assert!(!m.push_retried(1.5));
+    assert!(!m.push_retried());
     // No contact yet: nothing to try again.
     let mut m = monitor(vec![]);
     run_to(&mut m, 1, 30, |t| unspun(t, false, 0.0));
-    assert!(!m.push_retried(1.5));
+    assert!(!m.push_retried());
     // In stabilisation.
     let mut m = monitor(vec![]);
     run_to(&mut m, 1, 30, |t| unspun(t, (1.0..1.1).contains(&t), 3.0));
     m.enter_stabilisation(1.4);
-    assert!(!m.push_retried(1.5));
+    assert!(!m.push_retried());
 }
 
 #[test]

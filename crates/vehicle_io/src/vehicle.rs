@@ -190,7 +190,7 @@ impl VehicleBridge for SimBridge {
     fn controller_events(&mut self, events: u32) {
         let t = self.sim.time();
         if events & crate::msg::event::PUSH_RETRIED != 0 {
-            self.sim.push_retried(t);
+            self.sim.push_retried();
         }
         if events & crate::msg::event::STABILISING != 0 {
             self.sim.enter_stabilisation(t);
