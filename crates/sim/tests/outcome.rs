@@ -42,6 +42,30 @@ fn run_until_done(m: &mut Monitor, mut f: impl FnMut(f64) -> Observation) -> Out
     panic!("never decided");
 }
 
+/// The episode ran to its end undecided.
+#[track_caller]
+fn assert_no_termination(o: &Outcome) {
+    assert!(
+        matches!(
+            o,
+            Outcome::Failure {
+                cause: FailureCause::NoTermination,
+                ..
+            }
+        ),
+        "{o:?}"
+    );
+}
+
+/// The episode failed on an unsafe rebound at `at` s.
+#[track_caller]
+fn assert_rebound_at(o: &Outcome, at: f64) {
+    assert!(
+        matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - at).abs() < 1e-9),
+        "{o:?}"
+    );
+}
+
 #[test]
 fn a_target_reversed_and_at_rest_succeeds_after_the_dwell() {
     let mut m = monitor(vec![]);
@@ -110,31 +134,13 @@ fn reversed_but_still_rolling_succeeds_only_at_t_max_and_not_at_rest() {
         let yaw = if t < 9.7 - 1e-9 { PI / 2.0 } else { PI };
         obs(t, 50.0 - 1.0 * t, 0.0, yaw, 1.0, 0.0)
     });
-    assert!(
-        matches!(
-            o,
-            Outcome::Failure {
-                cause: FailureCause::NoTermination,
-                ..
-            }
-        ),
-        "{o:?}"
-    );
+    assert_no_termination(&o);
 
     // Spinning through the reversed heading at 1 rad/s: in the band (±0.35 rad) for 0.7 s
     // around t = 9.5 s but out of it at T_max.
     let mut m = monitor(vec![]);
     let o = run_until_done(&mut m, |t| obs(t, 50.0, 0.0, PI + (t - 9.5), 3.0, 1.0));
-    assert!(
-        matches!(
-            o,
-            Outcome::Failure {
-                cause: FailureCause::NoTermination,
-                ..
-            }
-        ),
-        "{o:?}"
-    );
+    assert_no_termination(&o);
 
     // Reversed and rolling, but it rolls over the road edge before T_max.
     let mut m = monitor(vec![]);
@@ -311,10 +317,7 @@ fn a_hard_recontact_in_stabilisation_is_an_unsafe_rebound() {
         let touching = (1.0..1.25).contains(&t) || (2.0..2.1).contains(&t);
         contact_obs(t, touching, if t > 1.9 { 3.0 } else { 4.0 })
     });
-    assert!(
-        matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 2.0).abs() < 1e-9),
-        "{o:?}"
-    );
+    assert_rebound_at(&o, 2.0);
     assert_eq!(m.metrics().contacts, 2);
 
     // The same with a gentle re-contact (0.5 m/s): no rebound.
@@ -323,16 +326,7 @@ fn a_hard_recontact_in_stabilisation_is_an_unsafe_rebound() {
         let touching = (1.0..1.25).contains(&t) || (2.0..2.1).contains(&t);
         contact_obs(t, touching, if t > 1.9 { 0.5 } else { 4.0 })
     });
-    assert!(
-        matches!(
-            o,
-            Outcome::Failure {
-                cause: FailureCause::NoTermination,
-                ..
-            }
-        ),
-        "{o:?}"
-    );
+    assert_no_termination(&o);
     assert_eq!(m.metrics().contacts, 2);
 
     // Chatter within 0.3 s is one episode (a push), never a rebound.
@@ -341,16 +335,7 @@ fn a_hard_recontact_in_stabilisation_is_an_unsafe_rebound() {
         let touching = (1.0..1.1).contains(&t) || (1.25..1.4).contains(&t);
         contact_obs(t, touching, 4.0)
     });
-    assert!(
-        matches!(
-            o,
-            Outcome::Failure {
-                cause: FailureCause::NoTermination,
-                ..
-            }
-        ),
-        "{o:?}"
-    );
+    assert_no_termination(&o);
     assert_eq!(m.metrics().contacts, 1);
 
     // A second push before the controller enters stabilisation is allowed; one after is not.
@@ -361,10 +346,7 @@ fn a_hard_recontact_in_stabilisation_is_an_unsafe_rebound() {
             (1.0..1.25).contains(&t) || (2.0..2.1).contains(&t) || (3.5..3.6).contains(&t);
         contact_obs(t, touching, 3.0)
     });
-    assert!(
-        matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 3.5).abs() < 1e-9),
-        "{o:?}"
-    );
+    assert_rebound_at(&o, 3.5);
     assert_eq!(m.metrics().contacts, 3);
 }
 
@@ -396,25 +378,13 @@ fn a_push_tried_again_on_an_unspun_target_is_a_first_contact() {
     // episode has ended).
     let mut m = monitor(vec![]);
     let o = run_until_done(&mut m, f);
-    assert!(
-        matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 2.5).abs() < 1e-9),
-        "{o:?}"
-    );
+    assert_rebound_at(&o, 2.5);
     // The controller went back to chasing at 1.5 s: the second push is a first contact.
     let mut m = monitor(vec![]);
     run_to(&mut m, 1, 30, f);
     assert!(m.push_retried());
     let o = run_until_done(&mut m, |t| f(t + 1.5));
-    assert!(
-        matches!(
-            o,
-            Outcome::Failure {
-                cause: FailureCause::NoTermination,
-                ..
-            }
-        ),
-        "{o:?}"
-    );
+    assert_no_termination(&o);
     assert_eq!(m.metrics().contacts, 2);
     // A third hard contact after the second push has ended is a rebound again.
     let mut m = monitor(vec![]);
@@ -425,10 +395,7 @@ fn a_push_tried_again_on_an_unspun_target_is_a_first_contact() {
         unspun(t, on, 3.0)
     };
     let o = run_until_done(&mut m, |t| third(t + 1.5));
-    assert!(
-        matches!(o, Outcome::Failure { cause: FailureCause::UnsafeRebound, time } if (time - 3.5).abs() < 1e-9),
-        "{o:?}"
-    );
+    assert_rebound_at(&o, 3.5);
 }
 
 #[test]
