@@ -388,7 +388,7 @@ impl PitController {
             let pin = input.planner_input(Some(self.planner.package().side), true);
             if self
                 .planner
-                .push_done(&pin, self.settings.phases.release_heading_tol)?
+                .push_done(&pin, &self.settings.phases.release())?
             {
                 self.phases.stabilise(input.time);
             }

@@ -25,7 +25,9 @@ pub mod settings;
 pub use controller::{
     ControllerError, ControllerInput, ControllerOutput, PitController, StepError,
 };
-pub use decision::{Judgement, PlanError, Planner, PlannerError, PlannerInput, MAX_OBSTACLES};
+pub use decision::{
+    Judgement, PlanError, Planner, PlannerError, PlannerInput, Release, MAX_OBSTACLES,
+};
 pub use package::{DecisionPackage, Infeasible, Mode, PlanStep, TerminalSet};
 pub use phase::{AbortReason, Phase, PhaseMachine, PhaseObservation};
 pub use settings::{

@@ -416,6 +416,11 @@ pub struct PhaseSettings {
     /// heading within this of the reversed heading (rad; the planner's `heading_tol` bounds
     /// it as well).
     pub release_heading_tol: f64,
+    /// ... and if the target left alone would end the look-ahead slower than
+    /// `release_rest_speed` (m/s; 0: never), with it within `release_rest_heading_tol`
+    /// (rad) instead: it has no spin left to come ([`crate::Release`]).
+    pub release_rest_speed: f64,
+    pub release_rest_heading_tol: f64,
     /// The target counts as settled below this speed (m/s) and yaw rate (rad/s).
     pub settle_speed: f64,
     pub settle_yaw_rate: f64,
@@ -462,6 +467,8 @@ impl Default for PhaseSettings {
             pit_yaw_done: 1.05,
             let_go_turn: 0.35,
             release_heading_tol: 0.6,
+            release_rest_speed: 6.0,
+            release_rest_heading_tol: 0.3,
             settle_speed: 0.5,
             settle_yaw_rate: 0.1,
             bullet_yaw_rate_max: 1.5,
@@ -479,6 +486,16 @@ impl Default for PhaseSettings {
 }
 
 impl PhaseSettings {
+    /// The closed loop's release test ([`crate::Planner::push_done`]).
+    #[must_use]
+    pub fn release(&self) -> crate::Release {
+        crate::Release {
+            heading_tol: self.release_heading_tol,
+            rest_speed: self.release_rest_speed,
+            rest_heading_tol: self.release_rest_heading_tol,
+        }
+    }
+
     /// Check every field.
     ///
     /// # Errors
@@ -509,6 +526,11 @@ impl PhaseSettings {
             ("phases.bullet_clearance_min", self.bullet_clearance_min),
             ("phases.let_go_turn", self.let_go_turn),
             ("phases.release_heading_tol", self.release_heading_tol),
+            ("phases.release_rest_speed", self.release_rest_speed),
+            (
+                "phases.release_rest_heading_tol",
+                self.release_rest_heading_tol,
+            ),
             ("phases.retry_turn", self.retry_turn),
             ("phases.retry_yaw_rate", self.retry_yaw_rate),
         ] {

@@ -11,7 +11,9 @@ use planner::decision::wrap;
 mod common;
 
 use common::{input, params, planner, road, states};
-use planner::{DecisionPackage, Infeasible, Mode, Planner, PlannerSettings};
+use planner::{
+    DecisionPackage, Infeasible, Mode, PhaseSettings, Planner, PlannerSettings, Release,
+};
 
 fn check_consistent(p: &DecisionPackage, s: &PlannerSettings, force_max: f64) {
     let n = s.steps();
@@ -562,21 +564,71 @@ fn a_push_is_done_once_the_target_left_alone_reverses() {
         inp
     };
     let tol = PlannerSettings::default().heading_tol;
-    assert!(p.push_done(&spun(1.5), tol).unwrap());
-    assert!(!p.push_done(&spun(0.0), tol).unwrap(), "no spin");
-    assert!(!p.push_done(&spun(4.0), tol).unwrap(), "spinning past");
-    assert!(!p.push_done(&spun(1.5), 0.0).unwrap(), "a zero tolerance");
+    assert!(p.push_done(&spun(1.5), &Release::heading(tol)).unwrap());
     assert!(
-        !p.push_done(&input(&road, &[], xt0, xb), tol).unwrap(),
+        !p.push_done(&spun(0.0), &Release::heading(tol)).unwrap(),
+        "no spin"
+    );
+    assert!(
+        !p.push_done(&spun(4.0), &Release::heading(tol)).unwrap(),
+        "spinning past"
+    );
+    assert!(
+        !p.push_done(&spun(1.5), &Release::heading(0.0)).unwrap(),
+        "a zero tolerance"
+    );
+    assert!(
+        !p.push_done(&input(&road, &[], xt0, xb), &Release::heading(tol))
+            .unwrap(),
         "a target driving on"
     );
     assert_eq!(p.package(), &pkg);
     let mut bad = spun(1.5);
     bad.target[3] = f64::NAN;
     assert_eq!(
-        p.push_done(&bad, tol).unwrap_err(),
+        p.push_done(&bad, &Release::heading(tol)).unwrap_err(),
         planner::PlanError::NonFiniteState
     );
+}
+
+/// A target that will have stopped by the end of the look-ahead has no spin left: the
+/// release asks for its heading within `release_rest_heading_tol` (0.3 rad), not the 0.6 rad
+/// that a target still sliding on may lack. Turned round but for 0.45 rad and moving along
+/// the road at 2 m/s, the push is not done (it is with the heading tolerance alone); 0.2 rad
+/// short it is; at 15 m/s the target slides on past the look-ahead, and the rest tolerance
+/// does not apply.
+#[test]
+fn a_target_coming_to_rest_is_released_only_nearly_reversed() {
+    let road = road();
+    let short = |off: f64, v: f64| {
+        let (mut xt, xb) = states(&road, -4.3, 2.2, 15.0, 16.0);
+        // Pushed from the right the target turns clockwise, towards −π.
+        let psi = -std::f64::consts::PI + off;
+        xt[2] = psi;
+        xt[0] = v * psi.cos();
+        xt[1] = -v * psi.sin();
+        xt[3] = 0.0;
+        let mut inp = input(&road, &[], xt, xb);
+        inp.side = Some(mpc::Side::Right);
+        inp
+    };
+    let release = PhaseSettings::default().release();
+    assert!((release.rest_heading_tol - 0.3).abs() < 1e-12 && release.rest_speed > 2.0);
+    let heading_only = Release::heading(release.heading_tol);
+    let mut p = planner(PlannerSettings::default());
+    assert!(p.push_done(&short(0.45, 2.0), &heading_only).unwrap());
+    assert!(!p.push_done(&short(0.45, 2.0), &release).unwrap());
+    assert!(p.push_done(&short(0.2, 2.0), &release).unwrap());
+    for off in [0.12, 0.45] {
+        // A target sliding on: the rest tolerance does not apply.
+        let fast = short(off, 15.0);
+        assert_eq!(
+            p.push_done(&fast, &release).unwrap(),
+            p.push_done(&fast, &heading_only).unwrap(),
+            "{off}"
+        );
+    }
+    assert!(p.push_done(&short(0.12, 15.0), &release).unwrap());
 }
 
 /// On a slippery road the spin left at the end of the look-ahead turns the target further
@@ -624,7 +676,9 @@ fn a_push_is_done_without_waiting_for_the_stopping_point() {
     };
     let mut p = planner(PlannerSettings::default());
     let tol = PlannerSettings::default().heading_tol;
-    assert!(p.push_done(&reversed(0.12), tol).unwrap());
+    assert!(p
+        .push_done(&reversed(0.12), &Release::heading(tol))
+        .unwrap());
     let pkg = p.plan(&reversed(0.12)).unwrap();
     assert_ne!(pkg.mode, Mode::Stabilise);
     assert!(
@@ -632,7 +686,7 @@ fn a_push_is_done_without_waiting_for_the_stopping_point() {
         "{}",
         pkg.predicted_stop_margin
     );
-    assert!(p.push_done(&reversed(0.0), tol).unwrap());
+    assert!(p.push_done(&reversed(0.0), &Release::heading(tol)).unwrap());
     assert_eq!(p.plan(&reversed(0.0)).unwrap().mode, Mode::Stabilise);
 }
 

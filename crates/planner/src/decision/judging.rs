@@ -105,6 +105,9 @@ impl Planner {
     /// first time it holds, instead of pushing on to the next replan. The package is not
     /// touched.
     ///
+    /// A free rollout that ends slower than `release.rest_speed` needs its heading within
+    /// `release.rest_heading_tol` ([`Release`]).
+    ///
     /// The stopping point is left out because pushing on cannot bring it back: a push whose
     /// heading is done only turns the target further, and a push held until the stopping
     /// point came inside the road over-rotated the target instead (full-size scenes, paired:
@@ -115,10 +118,17 @@ impl Planner {
     pub fn push_done(
         &mut self,
         input: &PlannerInput<'_>,
-        heading_tol: f64,
+        release: &Release,
     ) -> Result<bool, PlanError> {
         check_input(input)?;
         let lane = self.begin(input);
-        Ok(self.free_rollout_within(input, lane, heading_tol, false))
+        if !self.free_rollout_within(input, lane, release.heading_tol, false) {
+            return Ok(false);
+        }
+        let xn = &self.xs[self.n];
+        let at_rest = xn[idx::VX].hypot(xn[idx::VY]) < release.rest_speed;
+        Ok(!at_rest
+            || projected_heading_error(xn, self.yaw_decay(), self.psi_rev)
+                <= release.rest_heading_tol)
     }
 }

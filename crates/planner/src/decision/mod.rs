@@ -120,6 +120,37 @@ struct Outcome {
     stop_margin: f64,
 }
 
+/// When the closed loop of the push lets go ([`Planner::push_done`]): the target left alone
+/// must reach the terminal set with its projected heading within `heading_tol` of the
+/// reversed heading; if the free rollout ends slower than `rest_speed`, within
+/// `rest_heading_tol`.
+///
+/// A target that will have all but stopped at the end of the look-ahead has no spin left
+/// beyond it, so its projected heading is where it comes to rest, and the success test asks
+/// for that within ε_ψ (0.349 rad); a faster one goes on turning past the look-ahead. With
+/// one tolerance for both (0.6 rad), braking targets stopped 20–45° short of reversed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Release {
+    /// Largest projected heading error of the free rollout (rad).
+    pub heading_tol: f64,
+    /// Below this speed at the end of the look-ahead (m/s; 0: never) ...
+    pub rest_speed: f64,
+    /// ... the largest heading error is this instead, if smaller (rad).
+    pub rest_heading_tol: f64,
+}
+
+impl Release {
+    /// One tolerance whatever the predicted speed.
+    #[must_use]
+    pub fn heading(heading_tol: f64) -> Self {
+        Self {
+            heading_tol,
+            rest_speed: 0.0,
+            rest_heading_tol: heading_tol,
+        }
+    }
+}
+
 /// How the upper layer judges a given push ([`Planner::judge`]): the plan's own terminal
 /// and safety criteria on its rollout, without optimising anything.
 #[derive(Debug, Clone, Copy, PartialEq)]
