@@ -683,6 +683,14 @@ mod tests {
                 "[phases]\nrelease_heading_tol = -0.1",
                 "phases.release_heading_tol",
             ),
+            (
+                "[phases]\nrelease_rest_speed = nan",
+                "phases.release_rest_speed",
+            ),
+            (
+                "[phases]\nrelease_rest_heading_tol = -0.1",
+                "phases.release_rest_heading_tol",
+            ),
             ("[planner]\ndt = 0.1", "planner.dt"),
             ("[planner]\napproach_accel_min = -1.0", "approach_accel_min"),
             ("[mpc]\nhorizon = 1", "horizon"),
