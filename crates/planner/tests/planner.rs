@@ -563,30 +563,23 @@ fn a_push_is_done_once_the_target_left_alone_reverses() {
         inp.side = Some(mpc::Side::Right);
         inp
     };
-    let tol = PlannerSettings::default().heading_tol;
-    assert!(p.push_done(&spun(1.5), &Release::heading(tol)).unwrap());
-    assert!(
-        !p.push_done(&spun(0.0), &Release::heading(tol)).unwrap(),
-        "no spin"
-    );
-    assert!(
-        !p.push_done(&spun(4.0), &Release::heading(tol)).unwrap(),
-        "spinning past"
-    );
+    let release = Release::heading(PlannerSettings::default().heading_tol);
+    assert!(p.push_done(&spun(1.5), &release).unwrap());
+    assert!(!p.push_done(&spun(0.0), &release).unwrap(), "no spin");
+    assert!(!p.push_done(&spun(4.0), &release).unwrap(), "spinning past");
     assert!(
         !p.push_done(&spun(1.5), &Release::heading(0.0)).unwrap(),
         "a zero tolerance"
     );
     assert!(
-        !p.push_done(&input(&road, &[], xt0, xb), &Release::heading(tol))
-            .unwrap(),
+        !p.push_done(&input(&road, &[], xt0, xb), &release).unwrap(),
         "a target driving on"
     );
     assert_eq!(p.package(), &pkg);
     let mut bad = spun(1.5);
     bad.target[3] = f64::NAN;
     assert_eq!(
-        p.push_done(&bad, &Release::heading(tol)).unwrap_err(),
+        p.push_done(&bad, &release).unwrap_err(),
         planner::PlanError::NonFiniteState
     );
 }
@@ -675,10 +668,8 @@ fn a_push_is_done_without_waiting_for_the_stopping_point() {
         inp
     };
     let mut p = planner(PlannerSettings::default());
-    let tol = PlannerSettings::default().heading_tol;
-    assert!(p
-        .push_done(&reversed(0.12), &Release::heading(tol))
-        .unwrap());
+    let release = Release::heading(PlannerSettings::default().heading_tol);
+    assert!(p.push_done(&reversed(0.12), &release).unwrap());
     let pkg = p.plan(&reversed(0.12)).unwrap();
     assert_ne!(pkg.mode, Mode::Stabilise);
     assert!(
@@ -686,7 +677,7 @@ fn a_push_is_done_without_waiting_for_the_stopping_point() {
         "{}",
         pkg.predicted_stop_margin
     );
-    assert!(p.push_done(&reversed(0.0), &Release::heading(tol)).unwrap());
+    assert!(p.push_done(&reversed(0.0), &release).unwrap());
     assert_eq!(p.plan(&reversed(0.0)).unwrap().mode, Mode::Stabilise);
 }
 
