@@ -2,7 +2,8 @@
 //! while its shoves are simulated (a caller's threads then run scenes in parallel).
 
 use ::sim::oracle::{
-    ideal_pit as core_ideal_pit, oracle_tiers as core_tiers, OracleSettings, TIERS,
+    ideal_pit as core_ideal_pit, oracle_tiers as core_tiers, shove_grid as core_grid, DriverView,
+    OracleSettings, ShoveGrid, TIERS,
 };
 use ::sim::scenario::{Scenario, ScenarioError as CoreError};
 use pyo3::prelude::*;
@@ -125,7 +126,52 @@ fn oracle_tiers<'py>(
     Ok(d)
 }
 
+fn grid_true(sc: &Scenario, s: &OracleSettings) -> Result<ShoveGrid, CoreError> {
+    core_grid(sc, s, DriverView::True)
+}
+
+fn grid_held(sc: &Scenario, s: &OracleSettings) -> Result<ShoveGrid, CoreError> {
+    core_grid(sc, s, DriverView::Held)
+}
+
+/// The whole grid of single shoves on one scenario (JSON text): every candidate time (from
+/// the bullet's earliest arrival, every `time_step`) × side × size of the settings,
+/// simulated to the benchmark's verdict with the driver's true law (`held`: its command at
+/// the shove held). Returns `times` (s), `sides`, `shoves` (m/s), `success` (nested lists
+/// `[time][side][shove]` of bool) and `t_reach`. The GIL is released while it runs.
+#[pyfunction]
+#[pyo3(signature = (scenario, settings_json = None, held = false))]
+fn shove_grid<'py>(
+    py: Python<'py>,
+    scenario: &str,
+    settings_json: Option<&str>,
+    held: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let g = on_scenario(
+        py,
+        scenario,
+        settings_json,
+        if held { grid_held } else { grid_true },
+    )?;
+    let (ns, nv) = (g.sides.len(), g.shoves.len());
+    let success: Vec<Vec<Vec<bool>>> = (0..g.times.len())
+        .map(|it| {
+            (0..ns)
+                .map(|is| g.success[(it * ns + is) * nv..(it * ns + is + 1) * nv].to_vec())
+                .collect()
+        })
+        .collect();
+    let d = PyDict::new(py);
+    d.set_item("times", g.times)?;
+    d.set_item("sides", g.sides)?;
+    d.set_item("shoves", g.shoves)?;
+    d.set_item("success", success)?;
+    d.set_item("t_reach", g.t_reach)?;
+    Ok(d)
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(shove_grid, m)?)?;
     m.add_function(wrap_pyfunction!(oracle_settings, m)?)?;
     m.add_function(wrap_pyfunction!(ideal_pit, m)?)?;
     m.add_function(wrap_pyfunction!(oracle_tier_names, m)?)?;

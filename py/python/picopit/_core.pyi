@@ -418,6 +418,11 @@ def oracle_tier_names() -> List[str]: ...
 def oracle_tiers(scenario: str, settings_json: Optional[str] = None) -> Dict[str, Any]:
     """The tiers on one scenario (JSON): ``tiers`` (name -> chance of success), ``true_share``,
     ``held_share``, ``t_reach``, ``shoves`` (the GIL is released)."""
+def shove_grid(scenario: str, settings_json: Optional[str] = None, held: bool = False) -> Dict[str, Any]:
+    """Every single shove of the grid on one scenario (JSON), simulated to the verdict with the
+    driver's true law (``held``: its command held): ``times`` (s, from the bullet's earliest
+    arrival), ``sides``, ``shoves`` (m/s), ``success`` (``[time][side][shove]`` bools),
+    ``t_reach`` (the GIL is released)."""
 
 # --- planner (crates/planner): decision layer and whole-maneuver controller --------------
 

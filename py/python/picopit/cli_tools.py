@@ -57,7 +57,16 @@ def _oracle_parser(sub) -> None:
                    help="a picopit bench run (folder or episodes file): try each scene its controller "
                         "pushed only on the side it pushed from (the others on both sides)")
     p.add_argument("--config", metavar="NAME",
-                   help="the configuration of --sides-of (default picopinn)")
+                   help="the configuration of --sides-of or --grid-run (default picopinn)")
+    p.add_argument("--grid-plot", metavar="DIR",
+                   help="instead of the bound: simulate every shove of the grid (default 10 sizes "
+                        "0.4-3.15 m/s every 0.1 s, both sides) on each chosen scene (at most 20; 5-15 s "
+                        "each) and draw its success map to DIR/<scene>_shoves.png, with one "
+                        "line per scene: how many succeed and the widest band of sizes at one time")
+    p.add_argument("--grid-run", metavar="RUN",
+                   help="with --grid-plot: a picopit bench run (folder or episodes file) whose "
+                        "configuration's first contact is marked on the map, with the sizes that "
+                        "would have saved the scene there")
     p.add_argument("--workers", type=int, default=1, metavar="W", help="scenes at a time (threads; default 1)")
     p.add_argument("--scene-lines", action="store_true", help="also print one line per scene")
     p.add_argument("--json", metavar="PATH", help="write the settings, per-scene results and summary here")
@@ -78,9 +87,13 @@ def _cmd_oracle(args: argparse.Namespace) -> int:
     if args.subset is not None and (ids or args.n is not None or args.first):
         raise oracle.OracleError("--subset: give it alone, not with --ids, --first or --n")
     scenes = oracle.select(scenarios, args.first, args.n, ids, args.subset)
-    if args.config is not None and not args.sides_of:
-        raise oracle.OracleError(f"--config {args.config}: only with --sides-of RUN")
+    if args.config is not None and not (args.sides_of or args.grid_run):
+        raise oracle.OracleError(f"--config {args.config}: only with --sides-of RUN or --grid-run RUN")
     config = args.config or "picopinn"
+    if args.grid_run and not args.grid_plot:
+        raise oracle.OracleError("--grid-run: only with --grid-plot DIR")
+    if args.grid_plot:
+        return _grid_plots(args, scenes, config)
     sides = oracle.sides_of(Path(args.sides_of), config) if args.sides_of else None
     res = oracle.run(scenes, settings, tiers=args.tiers, workers=args.workers, progress=not args.no_progress,
                      sides=sides)
@@ -100,6 +113,29 @@ def _cmd_oracle(args: argparse.Namespace) -> int:
         print(f"picopit oracle: {len(errors)} scenes errored, the first: {errors[0]['id']}: {errors[0]['error']}",
               file=sys.stderr)
         return 1
+    return 0
+
+
+def _grid_plots(args: argparse.Namespace, scenes, config: str) -> int:
+    from . import oracle, oracle_grid
+
+    if args.tiers or args.sides_of or args.json:
+        raise oracle.OracleError("--grid-plot: not with --tiers, --sides-of or --json")
+    if len(scenes) > oracle_grid.MAX_SCENES:
+        raise oracle.OracleError(f"--grid-plot: {len(scenes)} scenes chosen; at most {oracle_grid.MAX_SCENES} "
+                                 "(name them with --ids)")
+    out = Path(args.grid_plot)
+    if out.exists() and not out.is_dir():
+        raise oracle.OracleError(f"--grid-plot {out}: exists and is not a folder")
+    settings = oracle.resolve_settings(args.settings, tiers=True)
+    marks = oracle_grid.first_contacts(Path(args.grid_run), config) if args.grid_run else {}
+    out.mkdir(parents=True, exist_ok=True)
+    for sc in scenes:
+        m = oracle_grid.shove_map(sc, settings)
+        mark = marks.get(sc["id"])
+        path = oracle_grid.plot(m, out / f"{sc['id']}_shoves.png", mark)
+        print(m.line(mark))
+        print(f"oracle: wrote {path}")
     return 0
 
 

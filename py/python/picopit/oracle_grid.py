@@ -1,0 +1,157 @@
+"""The shove map of one scene: every single rear-quarter shove of the oracle's grid (candidate
+time from the bullet's earliest arrival × side × size), simulated to the benchmark's verdict
+(``_core.shove_grid``), drawn as a success map per side, with where a controller's first
+contact landed if a benchmark run is given.
+
+It shows how much a push may be off and still save the scene: at full size, and most of all
+for a fast target, the sizes that succeed at one moment are often a single step of the grid
+(``docs/RESULTS.md``, the robust tiers).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional
+
+import numpy as np
+
+from . import _core
+
+#: The most scenes ``picopit oracle --grid-plot`` draws in one call (each simulates its whole
+#: grid: 5-15 s on the default grid, 2 000 simulated shoves).
+MAX_SCENES = 20
+
+
+@dataclass
+class ShoveMap:
+    """The grid of one scene: ``success[time, side, shove]``."""
+
+    scene: str
+    times: np.ndarray
+    sides: List[float]
+    shoves: List[float]
+    success: np.ndarray
+    t_reach: float
+
+    @property
+    def successes(self) -> int:
+        return int(self.success.sum())
+
+    def widest_band(self) -> int:
+        """The most consecutive sizes of the grid that succeed at one time on one side (0 when
+        none does): how far a push's size may be off."""
+        best = 0
+        for row in self.success.reshape(-1, len(self.shoves)):
+            run = 0
+            for ok in row:
+                run = run + 1 if ok else 0
+                best = max(best, run)
+        return best
+
+    def at(self, time: float, side: float) -> Optional[np.ndarray]:
+        """The sizes' verdicts at the candidate time nearest ``time`` (within one step) on
+        ``side``; None when the grid has no such time or side."""
+        if side not in self.sides or len(self.times) == 0:
+            return None
+        i = int(np.argmin(np.abs(self.times - time)))
+        step = float(self.times[1] - self.times[0]) if len(self.times) > 1 else 0.0
+        if abs(self.times[i] - time) > max(step, 1e-9):
+            return None
+        return self.success[i, self.sides.index(side)]
+
+    def line(self, mark: Optional[Mapping[str, Any]] = None) -> str:
+        """One line: successes of the grid, the widest band of sizes, and with ``mark``
+        (``time``, ``side``, ``stage``) which sizes would have saved the scene there."""
+        text = (f"{self.scene}: {self.successes} of {self.success.size} shoves succeed "
+                f"(earliest arrival {self.t_reach:.2f} s); widest band of sizes at one time: "
+                f"{self.widest_band()} of {len(self.shoves)}")
+        if mark is not None:
+            side = "left" if mark["side"] > 0 else "right"
+            ok = self.at(mark["time"], mark["side"])
+            if ok is None:
+                there = "outside the grid"
+            else:
+                sizes = [f"{v:g}" for v, s in zip(self.shoves, ok) if s]
+                there = f"sizes that succeed there: {', '.join(sizes) or 'none'} m/s"
+            text += (f"; the controller's first contact at {mark['time']:.2f} s on the {side} "
+                     f"({mark['stage']}): {there}")
+        return text
+
+
+def shove_map(scene: Mapping[str, Any], settings: Mapping[str, Any], held: bool = False) -> ShoveMap:
+    """Simulate the grid of ``settings`` (as :func:`picopit.oracle.resolve_settings` returns
+    them) on ``scene``; raises ``_core.ScenarioError`` for a bad scene."""
+    g = _core.shove_grid(json.dumps(dict(scene)), json.dumps(dict(settings)), held)
+    times = np.asarray(g["times"], dtype=float)
+    success = np.asarray(g["success"], dtype=bool).reshape(len(times), len(g["sides"]), len(g["shoves"]))
+    return ShoveMap(scene=str(scene["id"]), times=times, sides=[float(s) for s in g["sides"]],
+                    shoves=[float(v) for v in g["shoves"]], success=success, t_reach=float(g["t_reach"]))
+
+
+def first_contacts(run: Path, config: str) -> Dict[str, Dict[str, Any]]:
+    """``{scene: {"time", "side", "stage"}}`` of the scenes configuration ``config`` of a
+    benchmark run touched: its first contact's time, side (+1 the target's left) and where the
+    episode ended (success, lost in the push, lost after reversal). Raises
+    :class:`picopit.oracle.OracleError` for a run without the columns or without ``config``."""
+    from .compare import CompareError, episodes_file, read_rows
+    from .oracle import OracleError
+
+    cols = ("config", "scenario", "contact_at", "impact_y", "success", "reversed_at")
+    try:
+        path = episodes_file(Path(run))
+        rows = read_rows(path, cols)
+    except CompareError as e:
+        raise OracleError(f"--grid-run: {e}") from None
+    out: Dict[str, Dict[str, Any]] = {}
+    found = False
+    for r in rows:
+        if str(r["config"]) != config:
+            continue
+        found = True
+        try:
+            t, y = float(r["contact_at"]), float(r["impact_y"])  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            continue
+        if not (np.isfinite(t) and np.isfinite(y)) or y == 0.0:
+            continue
+        success = str(r["success"]).lower() in ("true", "1")
+        reversed_ = r["reversed_at"] not in (None, "") and np.isfinite(float(r["reversed_at"]))  # type: ignore[arg-type]
+        stage = "success" if success else ("lost after reversal" if reversed_ else "lost in the push")
+        out[str(r["scenario"])] = {"time": t, "side": 1.0 if y > 0 else -1.0, "stage": stage}
+    if not found:
+        raise OracleError(f"--config {config}: not in {path}")
+    return out
+
+
+def plot(m: ShoveMap, path: Path, mark: Optional[Mapping[str, Any]] = None) -> Path:
+    """The map as a PNG: one panel per side, contact time across, shove size up, the shoves
+    that succeed filled; the earliest arrival dashed and ``mark`` (a controller's first
+    contact) as a line on its side."""
+    from .plots import _pyplot
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(m.sides), figsize=(5.2 * len(m.sides), 3.6), sharey=True, squeeze=False)
+    step = float(m.times[1] - m.times[0]) if len(m.times) > 1 else 0.1
+    for j, side in enumerate(m.sides):
+        ax = axes[0][j]
+        if len(m.times):
+            grid = m.success[:, j, :].T.astype(float)
+            ax.imshow(grid, origin="lower", aspect="auto", cmap="Greens", vmin=0.0, vmax=1.2,
+                      extent=(m.times[0] - step / 2, m.times[-1] + step / 2, -0.5, len(m.shoves) - 0.5))
+        ax.axvline(m.t_reach, color="0.4", ls="--", lw=0.9, label="earliest arrival")
+        if mark is not None and mark["side"] == side:
+            ax.axvline(mark["time"], color="tab:red", lw=1.4, label=f"controller's contact ({mark['stage']})")
+        ax.set_yticks(range(len(m.shoves)))
+        ax.set_yticklabels([f"{v:g}" for v in m.shoves])
+        ax.set_xlabel("contact time (s)")
+        ax.set_title(f"bullet on the target's {'left' if side > 0 else 'right'}", fontsize=10)
+        ax.legend(loc="upper right", fontsize=7)
+    axes[0][0].set_ylabel("shove size Δv (m/s)")
+    fig.suptitle(f"{m.scene}: {m.successes} of {m.success.size} single shoves succeed", fontsize=11)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
