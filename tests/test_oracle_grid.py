@@ -76,11 +76,58 @@ def test_grid_plot_draws_each_scene_and_marks_the_runs_contact(tmp_path, capsys)
     (["--n", "21", "--grid-plot", "{tmp}"], "at most 20"),
     (["--ids", "sc-00002", "--grid-plot", "{tmp}", "--tiers"], "not with --tiers"),
     (["--ids", "sc-00002", "--grid-plot", "{tmp}", "--grid-run", "{tmp}/missing"], "no such run"),
-    (["--ids", "sc-00002", "--grid-plot", "{file}"], "not a folder"),
+    (["--ids", "sc-00002", "--grid-plot", "{file}"], "--grid-plot"),
+    (["--ids", "sc-00002", "--grid-plot", "/proc/picopit-x"], "--grid-plot /proc/picopit-x"),
 ])
 def test_grid_plot_refuses_bad_input_naming_it(tmp_path, capsys, argv, words):
     (tmp_path / "f.txt").write_text("x")
     argv = [a.replace("{tmp}", str(tmp_path)).replace("{file}", str(tmp_path / "f.txt")) for a in argv]
+    rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--no-progress", *argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "Traceback" not in err, err
+
+
+def test_at_contact_judges_each_touched_scene_at_its_first_contact(tmp_path, capsys):
+    """--at-contact RUN: the sizes at the candidate time nearest the run's first contact, from
+    its side, are the map's column there; a contact before the bound's earliest arrival has no
+    candidate time; an untouched scene is left out; the table counts them by stage."""
+    settings = oracle.resolve_settings(COARSE, tiers=True)
+    a, b = _scene("sc-00002"), _scene("sc-00004")
+    ma = oracle_grid.shove_map(a, settings)
+    side = 1.0 if ma.success[:, 0, :].any() else -1.0
+    it = next(i for i in range(len(ma.times)) if ma.success[i, ma.sides.index(side)].any())
+    t = float(ma.times[it]) + 0.05
+    run = tmp_path / "episodes.csv"
+    run.write_text("config,scenario,contact_at,impact_y,success,reversed_at\n"
+                   f"picopinn,sc-00002,{t},{0.7 * side},True,{t + 2.0}\n"
+                   f"picopinn,sc-00004,0.5,-0.7,False,\n"
+                   "picopinn,sc-00005,,,False,\n")
+    out = tmp_path / "at.json"
+    rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--ids", "sc-00002,sc-00004,sc-00005", "--settings",
+                   COARSE, "--at-contact", str(run), "--no-progress", "--json", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "2 of 3 scenes touched by picopinn" in text
+    doc = json.loads(out.read_text())
+    rows = {r["id"]: r for r in doc["scenes"]}
+    assert set(rows) == {"sc-00002", "sc-00004"}
+    assert rows["sc-00002"]["time"] == pytest.approx(ma.times[it])
+    assert rows["sc-00002"]["success"] == [bool(v) for v in ma.success[it, ma.sides.index(side)]]
+    assert rows["sc-00004"]["time"] is None and rows["sc-00004"]["stage"] == "lost in the push"
+    summary = {s["stage"]: s for s in doc["summary"]}
+    assert summary["success"]["scenes"] == 1 and summary["success"]["saving"] == 1
+    assert summary["lost in the push"] == {**summary["lost in the push"], "scenes": 1, "on_grid": 0, "saving": 0}
+    assert "| success | 1 | 1 | 1 |" in text and "| lost in the push | 1 | 0 | 0 | 0 |" in text
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--params", "half_scale", "--n", "4"], "--params half_scale: none of the chosen scenes"),
+    (["--ids", "sc-00002", "--at-contact", "{tmp}/missing"], "no such run"),
+    (["--ids", "sc-00002", "--at-contact", "{tmp}", "--grid-plot", "{tmp}"], "not with --grid-plot"),
+    (["--ids", "sc-00002", "--at-contact", "{tmp}", "--tiers"], "not with --tiers"),
+])
+def test_at_contact_and_params_refuse_bad_input_naming_it(tmp_path, capsys, argv, words):
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
     rc = cli.main(["oracle", "--scenarios", str(TEXTBOOK), "--no-progress", *argv])
     err = capsys.readouterr().err
     assert rc == 2 and words in err and "Traceback" not in err, err

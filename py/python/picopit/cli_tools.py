@@ -11,7 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .outputs import check_file
+from .outputs import check_dir, check_file
 
 DEFAULT_SCENARIOS = "data/scenarios.jsonl"
 
@@ -46,6 +46,8 @@ def _oracle_parser(sub) -> None:
     p.add_argument("--subset", type=int, metavar="N",
                    help="the benchmark's stratified subset of N scenes (as picopit bench picks its "
                         "default 128) instead of --first/--n")
+    p.add_argument("--params", metavar="NAME",
+                   help="only the chosen scenes of this parameter set (full_size or half_scale)")
     p.add_argument("--tiers", action="store_true",
                    help="the tiers (the whole grid twice per scene; default grid 10 sizes 0.4-3.15 m/s "
                         "every 0.1 s)")
@@ -63,6 +65,11 @@ def _oracle_parser(sub) -> None:
                         "0.4-3.15 m/s every 0.1 s, both sides) on each chosen scene (at most 20; 5-15 s "
                         "each) and draw its success map to DIR/<scene>_shoves.png, with one "
                         "line per scene: how many succeed and the widest band of sizes at one time")
+    p.add_argument("--at-contact", metavar="RUN",
+                   help="instead of the bound: for each chosen scene a picopit bench run's configuration "
+                        "touched, every size of the grid shoved at the candidate time nearest its first "
+                        "contact, from the side it came from; prints, by where the episode ended, how "
+                        "often some size (and two or more adjacent sizes) would have saved the scene there")
     p.add_argument("--grid-run", metavar="RUN",
                    help="with --grid-plot: a picopit bench run (folder or episodes file) whose "
                         "configuration's first contact is marked on the map, with the sizes that "
@@ -87,13 +94,24 @@ def _cmd_oracle(args: argparse.Namespace) -> int:
     if args.subset is not None and (ids or args.n is not None or args.first):
         raise oracle.OracleError("--subset: give it alone, not with --ids, --first or --n")
     scenes = oracle.select(scenarios, args.first, args.n, ids, args.subset)
-    if args.config is not None and not (args.sides_of or args.grid_run):
-        raise oracle.OracleError(f"--config {args.config}: only with --sides-of RUN or --grid-run RUN")
+    if args.params is not None:
+        kept = [s for s in scenes if s.get("params") == args.params]
+        if not kept:
+            found = sorted({str(s.get("params")) for s in scenes})
+            raise oracle.OracleError(f"--params {args.params}: none of the chosen scenes (they are {', '.join(found)})")
+        scenes = kept
+    if args.config is not None and not (args.sides_of or args.grid_run or args.at_contact):
+        raise oracle.OracleError(f"--config {args.config}: only with --sides-of RUN, --grid-run RUN or "
+                                 "--at-contact RUN")
     config = args.config or "picopinn"
     if args.grid_run and not args.grid_plot:
         raise oracle.OracleError("--grid-run: only with --grid-plot DIR")
+    if args.grid_plot and args.at_contact:
+        raise oracle.OracleError("--at-contact: not with --grid-plot")
     if args.grid_plot:
         return _grid_plots(args, scenes, config)
+    if args.at_contact:
+        return _at_contact(args, scenes, config)
     sides = oracle.sides_of(Path(args.sides_of), config) if args.sides_of else None
     res = oracle.run(scenes, settings, tiers=args.tiers, workers=args.workers, progress=not args.no_progress,
                      sides=sides)
@@ -124,18 +142,36 @@ def _grid_plots(args: argparse.Namespace, scenes, config: str) -> int:
     if len(scenes) > oracle_grid.MAX_SCENES:
         raise oracle.OracleError(f"--grid-plot: {len(scenes)} scenes chosen; at most {oracle_grid.MAX_SCENES} "
                                  "(name them with --ids)")
-    out = Path(args.grid_plot)
-    if out.exists() and not out.is_dir():
-        raise oracle.OracleError(f"--grid-plot {out}: exists and is not a folder")
     settings = oracle.resolve_settings(args.settings, tiers=True)
     marks = oracle_grid.first_contacts(Path(args.grid_run), config) if args.grid_run else {}
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_dir(args.grid_plot, "--grid-plot")
     for sc in scenes:
         m = oracle_grid.shove_map(sc, settings)
         mark = marks.get(sc["id"])
         path = oracle_grid.plot(m, out / f"{sc['id']}_shoves.png", mark)
         print(m.line(mark))
         print(f"oracle: wrote {path}")
+    return 0
+
+
+def _at_contact(args: argparse.Namespace, scenes, config: str) -> int:
+    import json
+
+    from . import oracle, oracle_grid
+
+    if args.tiers or args.sides_of:
+        raise oracle.OracleError("--at-contact: not with --tiers or --sides-of")
+    settings = oracle.resolve_settings(args.settings, tiers=True)
+    marks = oracle_grid.first_contacts(Path(args.at_contact), config)
+    res = oracle_grid.at_contact(scenes, marks, settings, workers=args.workers, progress=not args.no_progress)
+    print(f"oracle at contact: {len(res.rows)} of {len(scenes)} scenes touched by {config} in {args.at_contact}, "
+          f"shoves {settings['shoves']} m/s at the candidate time (every {settings['time_step']} s) nearest "
+          "the first contact, from its side")
+    print(res.markdown(), end="")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"settings": res.settings, "summary": res.summary(),
+                                               "scenes": res.rows}, indent=1) + "\n")
+        print(f"oracle: wrote {args.json}")
     return 0
 
 

@@ -42,13 +42,7 @@ class ShoveMap:
     def widest_band(self) -> int:
         """The most consecutive sizes of the grid that succeed at one time on one side (0 when
         none does): how far a push's size may be off."""
-        best = 0
-        for row in self.success.reshape(-1, len(self.shoves)):
-            run = 0
-            for ok in row:
-                run = run + 1 if ok else 0
-                best = max(best, run)
-        return best
+        return max((_band(list(row)) for row in self.success.reshape(-1, len(self.shoves))), default=0)
 
     def at(self, time: float, side: float) -> Optional[np.ndarray]:
         """The sizes' verdicts at the candidate time nearest ``time`` (within one step) on
@@ -155,3 +149,83 @@ def plot(m: ShoveMap, path: Path, mark: Optional[Mapping[str, Any]] = None) -> P
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+@dataclass
+class AtContact:
+    """The grid's sizes at the moment and on the side a run's controller first touched each
+    scene's target, by where its episode ended (``stage``)."""
+
+    settings: Dict[str, Any]
+    #: per scene: id, stage, contact time, side, candidate time (None before the earliest
+    #: arrival), the sizes' verdicts there
+    rows: List[Dict[str, Any]]
+
+    STAGES = ("success", "lost in the push", "lost after reversal")
+
+    def summary(self) -> List[Dict[str, Any]]:
+        out = []
+        for stage in self.STAGES:
+            rows = [r for r in self.rows if r["stage"] == stage]
+            on = [r for r in rows if r["time"] is not None]
+            bands = sorted(_band(r["success"]) for r in on)
+            out.append({"stage": stage, "scenes": len(rows), "on_grid": len(on),
+                        "saving": sum(1 for r in on if any(r["success"])),
+                        "band_2": sum(1 for b in bands if b >= 2),
+                        "median_band": float(np.median(bands)) if bands else float("nan")})
+        return out
+
+    def markdown(self) -> str:
+        lines = ["| ended | scenes | contact at a candidate time | some size saves | two or more adjacent sizes save | median band (sizes) |",
+                 "|---|---|---|---|---|---|"]
+        for s in self.summary():
+            lines.append(f"| {s['stage']} | {s['scenes']} | {s['on_grid']} | {s['saving']} | {s['band_2']} | "
+                         f"{s['median_band']:.1f} |")
+        return "\n".join(lines) + "\n"
+
+
+def _band(row: List[bool]) -> int:
+    best = run = 0
+    for ok in row:
+        run = run + 1 if ok else 0
+        best = max(best, run)
+    return best
+
+
+def at_contact(scenes: List[Mapping[str, Any]], marks: Mapping[str, Mapping[str, Any]],
+               settings: Mapping[str, Any], workers: int = 1, progress: bool = True) -> AtContact:
+    """For each scene in ``marks`` (:func:`first_contacts`), every size of the grid shoved at
+    the candidate time nearest the first contact (within half a ``time_step``) from the side
+    it came from: would one of them have saved the scene there?"""
+    from concurrent.futures import ThreadPoolExecutor
+
+    step = float(settings["time_step"])
+    chosen = [sc for sc in scenes if sc["id"] in marks]
+
+    def one(sc: Mapping[str, Any]) -> Dict[str, Any]:
+        mk = marks[sc["id"]]
+        t = float(mk["time"])
+        own = dict(settings, window=[t - 0.5 * step, t + 0.5 * step], sides=[mk["side"]])
+        m = shove_map(sc, own)
+        row: Dict[str, Any] = {"id": sc["id"], "stage": mk["stage"], "contact_at": t, "side": mk["side"],
+                               "time": None, "success": []}
+        if len(m.times):
+            i = int(np.argmin(np.abs(m.times - t)))
+            row["time"] = float(m.times[i])
+            row["success"] = [bool(v) for v in m.success[i, 0]]
+        return row
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(chosen), unit="scene", desc="oracle at contact")
+    rows = []
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        for row in pool.map(one, chosen):
+            rows.append(row)
+            if bar is not None:
+                bar.update()
+    if bar is not None:
+        bar.close()
+    return AtContact(settings=dict(settings), rows=rows)
