@@ -162,7 +162,7 @@ def _at_contact(args: argparse.Namespace, scenes, config: str) -> int:
     if args.tiers or args.sides_of:
         raise oracle.OracleError("--at-contact: not with --tiers or --sides-of")
     settings = oracle.resolve_settings(args.settings, tiers=True)
-    marks = oracle_grid.first_contacts(Path(args.at_contact), config)
+    marks = oracle_grid.first_contacts(Path(args.at_contact), config, "--at-contact")
     res = oracle_grid.at_contact(scenes, marks, settings, workers=args.workers, progress=not args.no_progress)
     print(f"oracle at contact: {len(res.rows)} of {len(scenes)} scenes touched by {config} in {args.at_contact}, "
           f"shoves {settings['shoves']} m/s at the candidate time (every {settings['time_step']} s) nearest "

@@ -35,7 +35,7 @@ from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
 
 from . import _core
 
@@ -161,20 +161,21 @@ def select(scenarios: Sequence[Mapping[str, Any]], first: int = 0, n: Optional[i
     return chosen
 
 
-def sides_of(run: Path, config: str) -> Dict[str, float]:
-    """``{scene: side}`` of the scenes that configuration ``config`` of a benchmark run (its
-    folder or episodes file) pushed: +1 where its first contact was on the target's left
-    (``impact_y`` > 0), -1 on its right; scenes without a contact are left out. Raises
-    :class:`OracleError` for a run without the columns, without ``config``, or with a
-    malformed ``impact_y`` (naming the row)."""
+def contact_rows(run: Path, config: str, option: str,
+                 extra: Sequence[str] = ()) -> Iterator[Tuple[Dict[str, Any], float]]:
+    """The rows of configuration ``config`` in a benchmark run (its folder or episodes file)
+    whose first contact had a side, with that side (+1 where ``impact_y`` > 0, the target's
+    left; -1 on its right); rows without a contact are skipped. Reads the columns ``config``,
+    ``scenario``, ``impact_y`` and ``extra``. Raises :class:`OracleError` naming ``option``
+    for a run without the columns, without ``config``, or with a malformed ``impact_y``
+    (naming the row)."""
     from .compare import CompareError, episodes_file, read_rows
 
     try:
         path = episodes_file(Path(run))
-        rows = read_rows(path, ("config", "scenario", "impact_y"))
+        rows = read_rows(path, ("config", "scenario", "impact_y", *extra))
     except CompareError as e:
-        raise OracleError(f"--sides-of: {e}") from None
-    out: Dict[str, float] = {}
+        raise OracleError(f"{option}: {e}") from None
     found = False
     for i, r in enumerate(rows, start=1):
         if str(r["config"]) != config:
@@ -186,13 +187,18 @@ def sides_of(run: Path, config: str) -> Dict[str, float]:
         try:
             y = float(y)  # type: ignore[arg-type]
         except (TypeError, ValueError):
-            raise OracleError(f"--sides-of: {path}: row {i}: impact_y {y!r} is not a number") from None
+            raise OracleError(f"{option}: {path}: row {i}: impact_y {y!r} is not a number") from None
         if math.isfinite(y) and y != 0.0:
-            out[str(r["scenario"])] = 1.0 if y > 0.0 else -1.0
+            yield r, (1.0 if y > 0.0 else -1.0)
     if not found:
         configs = sorted({str(r["config"]) for r in rows})
         raise OracleError(f"--config {config}: not in {path} (it has {', '.join(configs) or 'no rows'})")
-    return out
+
+
+def sides_of(run: Path, config: str) -> Dict[str, float]:
+    """``{scene: side}`` of the scenes that configuration ``config`` of a benchmark run (its
+    folder or episodes file) pushed, by their first contact (:func:`contact_rows`)."""
+    return {str(r["scenario"]): side for r, side in contact_rows(run, config, "--sides-of")}
 
 
 def run(scenes: Sequence[Mapping[str, Any]], settings: Mapping[str, Any], tiers: bool = False,

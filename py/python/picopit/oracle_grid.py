@@ -84,39 +84,32 @@ def shove_map(scene: Mapping[str, Any], settings: Mapping[str, Any], held: bool 
                     shoves=[float(v) for v in g["shoves"]], success=success, t_reach=float(g["t_reach"]))
 
 
-def first_contacts(run: Path, config: str) -> Dict[str, Dict[str, Any]]:
+def first_contacts(run: Path, config: str, option: str = "--grid-run") -> Dict[str, Dict[str, Any]]:
     """``{scene: {"time", "side", "stage"}}`` of the scenes configuration ``config`` of a
     benchmark run touched: its first contact's time, side (+1 the target's left) and where the
     episode ended (success, lost in the push, lost after reversal). Raises
-    :class:`picopit.oracle.OracleError` for a run without the columns or without ``config``."""
-    from .compare import CompareError, episodes_file, read_rows
-    from .oracle import OracleError
+    :class:`picopit.oracle.OracleError` as :func:`picopit.oracle.contact_rows` does."""
+    from .oracle import contact_rows
 
-    cols = ("config", "scenario", "contact_at", "impact_y", "success", "reversed_at")
-    try:
-        path = episodes_file(Path(run))
-        rows = read_rows(path, cols)
-    except CompareError as e:
-        raise OracleError(f"--grid-run: {e}") from None
     out: Dict[str, Dict[str, Any]] = {}
-    found = False
-    for r in rows:
-        if str(r["config"]) != config:
-            continue
-        found = True
-        try:
-            t, y = float(r["contact_at"]), float(r["impact_y"])  # type: ignore[arg-type]
-        except (TypeError, ValueError):
-            continue
-        if not (np.isfinite(t) and np.isfinite(y)) or y == 0.0:
+    for r, side in contact_rows(run, config, option, ("contact_at", "success", "reversed_at")):
+        t = _number(r["contact_at"])
+        if t is None:
             continue
         success = str(r["success"]).lower() in ("true", "1")
-        reversed_ = r["reversed_at"] not in (None, "") and np.isfinite(float(r["reversed_at"]))  # type: ignore[arg-type]
-        stage = "success" if success else ("lost after reversal" if reversed_ else "lost in the push")
-        out[str(r["scenario"])] = {"time": t, "side": 1.0 if y > 0 else -1.0, "stage": stage}
-    if not found:
-        raise OracleError(f"--config {config}: not in {path}")
+        stage = "success" if success else (
+            "lost after reversal" if _number(r["reversed_at"]) is not None else "lost in the push")
+        out[str(r["scenario"])] = {"time": t, "side": side, "stage": stage}
     return out
+
+
+def _number(v: Any) -> Optional[float]:
+    """A finite number from a run's cell; None for an empty or non-finite one."""
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return None
+    return x if np.isfinite(x) else None
 
 
 def plot(m: ShoveMap, path: Path, mark: Optional[Mapping[str, Any]] = None) -> Path:
