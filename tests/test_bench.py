@@ -78,6 +78,13 @@ def test_bench_writes_the_tables_json_episodes_and_figures(bench_run):
         assert [b["band"] for b in s["by_speed"]] == ["< 10", "10–15", "15–20", "≥ 20"]
         assert sum(b["episodes"] for b in s["by_speed"]) == s["episodes"]
     assert "| picopinn | ≥ 20 |" in md
+    # By the driver: every kind listed, each scene under its own (the three scenes' kinds).
+    drivers = {d["id"]: d["driver"]["kind"] for d in map(json.loads, SCENARIOS.read_text().splitlines())}
+    kinds = sorted(drivers[i] for i in doc["run"]["scene_ids"])
+    for s in doc["configs"].values():
+        assert [b["driver"] for b in s["by_driver"]] == ["none", "lane_keep", "brake", "counter_steer"]
+        assert sorted(b["driver"] for b in s["by_driver"] for _ in range(b["episodes"])) == kinds
+    assert f"| picopinn | {kinds[0]} |" in md
     # Paired comparison: every pair once, its counts agree with the per-configuration successes.
     assert "Paired comparison" in md
     assert len(doc["paired"]) == len(PRESETS) * (len(PRESETS) - 1) // 2
@@ -326,6 +333,33 @@ def test_success_by_target_speed_counts_bands_and_speeds_at_reversal():
     assert b["≥ 20"]["reversed_speed_lost_median"] == pytest.approx(13.0)
     md = markdown({"x": {"by_speed": list(b.values())}})
     assert "| x | ≥ 20 | 2 | 0.0 | 100.0 | 13.0 | – |" in md
+
+
+def test_success_by_driver_counts_contacts_reversals_and_what_the_reversed_kept():
+    from picopit.bench_summary import by_driver, markdown
+
+    meta = {0: {"driver": "brake"}, 1: {"driver": "brake"}, 2: {"driver": "brake"},
+            3: {"driver": "lane_keep"}, 4: {"driver": None}}
+    rows = [
+        {"index": 0, "success": True, "contacts": 1, "reversed_at": 4.0},
+        {"index": 1, "success": False, "contacts": 2, "reversed_at": 5.0},  # turned round, lost after
+        {"index": 2, "success": False, "contacts": 0, "reversed_at": None},  # lost before contact
+        {"index": 3, "success": False, "contacts": 1, "reversed_at": float("nan")},  # lost in the push
+        {"index": 4, "success": True, "contacts": 1, "reversed_at": 3.0},  # no driver named: left out
+    ]
+    b = {x["driver"]: x for x in by_driver(rows, meta)}
+    assert list(b) == ["none", "lane_keep", "brake", "counter_steer"]
+    assert b["brake"]["episodes"] == 3
+    assert b["brake"]["contact_rate"] == pytest.approx(200 / 3)
+    assert b["brake"]["reversed_rate"] == pytest.approx(200 / 3)
+    assert b["brake"]["success_rate"] == pytest.approx(100 / 3)
+    assert b["brake"]["reversed_success_rate"] == pytest.approx(50.0)
+    assert (b["lane_keep"]["contact_rate"], b["lane_keep"]["reversed_rate"]) == (100.0, 0.0)
+    assert b["lane_keep"]["reversed_success_rate"] is None
+    assert b["none"]["episodes"] == 0 and b["none"]["success_rate"] is None
+    md = markdown({"x": {"by_driver": list(b.values())}})
+    assert "| x | brake | 3 | 66.7 | 66.7 | 33.3 | 50.0 |" in md
+    assert "| x | none | 0 | – | – | – | – |" in md
 
 
 def test_controller_settings_files_override_the_presets_and_bad_ones_are_named(tmp_path, monkeypatch, capsys):

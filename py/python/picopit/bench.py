@@ -376,7 +376,7 @@ def run(cfg: BenchConfig, progress: bool = True) -> BenchResult:
     scenarios, scenes = load_scenes(cfg)
     meta = {i: {"id": scenarios[i]["id"], "category": scenarios[i]["category"],
                 "road": road_type(scenarios[i]["category"]), "adhesion": scenarios[i]["adhesion"],
-                "params": scenarios[i]["params"], "mu": scenarios[i]["mu"],
+                "params": scenarios[i]["params"], "driver": (scenarios[i].get("driver") or {}).get("kind"), "mu": scenarios[i]["mu"],
                 "target_speed": math.hypot(scenarios[i]["target"]["vx"], scenarios[i]["target"]["vy"])}
             for i in scenes}
     models = str(cfg.models.resolve())

@@ -3,7 +3,8 @@ comparison, and the tables and files they are written to.
 
 * ``summarise``: one row of metrics per configuration (success overall, by road and adhesion
   band, heading error, safety margin, violation and collision rates, pooled planning and control
-  times, failure causes, the funnel, and ``by_speed``: by the target's initial speed);
+  times, failure causes, the funnel, ``by_speed``: by the target's initial speed, and
+  ``by_driver``: by the target driver's kind);
 * ``paired`` and ``mcnemar_exact_p``: every pair of configurations on the scenes both ran;
 * ``markdown`` and ``write_csv``: ``summary.md`` and ``summary.csv``;
 * ``episode_table`` and ``write_episodes``: ``episodes.parquet`` (``episodes.csv`` without
@@ -29,6 +30,8 @@ BANDS = ("low", "mid", "high")
 # The target's initial speed (m/s): label, lower bound (inclusive), upper bound (exclusive).
 SPEED_BANDS: Tuple[Tuple[str, float, float], ...] = (
     ("< 10", 0.0, 10.0), ("10–15", 10.0, 15.0), ("15–20", 15.0, 20.0), ("≥ 20", 20.0, math.inf))
+# The target driver's kinds (the scenarios' ``driver.kind``), in the order the tables list them.
+DRIVERS = ("none", "lane_keep", "brake", "counter_steer")
 CAUSES = ("decision_infeasible", "no_termination", "boundary_violation", "secondary_collision",
           "unsafe_rebound")
 ERROR_CAUSE = "error"
@@ -97,6 +100,7 @@ def summarise(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str,
             s[f"fail_{c}"] = _pct(sum(r.get("cause") == c for r in rs), n)
         s["funnel"] = funnel.funnel(rs)
         s["by_speed"] = by_speed(rs, meta)
+        s["by_driver"] = by_driver(rs, meta)
         out[name] = s
     return out
 
@@ -123,6 +127,24 @@ def by_speed(rs: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str, An
             "reversed_rate": _pct(sum(_reversed(r) for r in sub), len(sub)),
             "reversed_speed_lost_median": _finite(np.median(lost)) if lost else None,
             "reversed_speed_success_median": _finite(np.median(won)) if won else None,
+        })
+    return out
+
+
+def by_driver(rs: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str, Any]]) -> List[Dict[str, Any]]:
+    """One configuration's episodes by the target driver's kind (``DRIVERS``; scenes whose meta
+    names no driver are left out): how many, the shares touched, turned round and saved, and the
+    share of the turned-round targets that were saved (the push's work kept or lost afterwards)."""
+    out = []
+    for kind in DRIVERS:
+        sub = [r for r in rs if meta[r["index"]].get("driver") == kind]
+        rev = [r for r in sub if _reversed(r)]
+        out.append({
+            "driver": kind, "episodes": len(sub),
+            "contact_rate": _pct(sum((r.get("contacts") or 0) > 0 for r in sub), len(sub)),
+            "reversed_rate": _pct(len(rev), len(sub)),
+            "success_rate": _pct(sum(bool(r["success"]) for r in sub), len(sub)),
+            "reversed_success_rate": _pct(sum(bool(r["success"]) for r in rev), len(rev)),
         })
     return out
 
@@ -223,6 +245,17 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
                          f"{_fmt(b['reversed_rate'])} | {_fmt(b['reversed_speed_lost_median'])} | "
                          f"{_fmt(b['reversed_speed_success_median'])} |")
     lines.append("")
+    lines.append("By the target driver's kind: the shares touched, turned round and saved, and the share of "
+                 "the turned-round targets saved:")
+    lines.append("")
+    lines.append("| config | driver | episodes | contact % | reversed % | success % | reversed → success % |")
+    lines.append("|---|---|---|---|---|---|---|")
+    for name, s in summary.items():
+        for b in s.get("by_driver", ()):
+            lines.append(f"| {name} | {b['driver']} | {b['episodes']} | {_fmt(b['contact_rate'])} | "
+                         f"{_fmt(b['reversed_rate'])} | {_fmt(b['success_rate'])} | "
+                         f"{_fmt(b['reversed_success_rate'])} |")
+    lines.append("")
     if pairs:
         lines.append("Paired comparison (the same scenes and seeds; exact McNemar test on the scenes "
                      "only one of the two saved):")
@@ -238,8 +271,9 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
 
 def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     """The scalar metrics, one row per configuration (the funnel's stage counts flattened to
-    ``funnel_<stage>``; its losses and the speed bands are in summary.json and summary.md)."""
-    flat = {name: {**{k: v for k, v in s.items() if k not in ("funnel", "by_speed")},
+    ``funnel_<stage>``; its losses, the speed bands and the drivers are in summary.json and
+    summary.md)."""
+    flat = {name: {**{k: v for k, v in s.items() if k not in ("funnel", "by_speed", "by_driver")},
                    **{f"funnel_{st}": s["funnel"][st] for st in funnel.STAGES if "funnel" in s}}
             for name, s in summary.items()}
     summary = flat
@@ -251,7 +285,8 @@ def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
             w.writerow([name] + ["" if s.get(k) is None else s.get(k) for k in keys])
 
 
-EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion", "params", "mu", "target_speed",
+EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion", "params", "driver", "mu",
+                  "target_speed",
                   "seed", "model", "param_count", "upper_layer", "success", "at_rest", "cause", "decided_at",
                   "terminal_heading_error", "min_margin", "boundary_violation", "secondary_collision",
                   "contacts", "contact_at", "impact_speed", "impact_angle", "impact_x", "impact_y", "reversed_at",
@@ -267,7 +302,7 @@ def episode_table(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[
         m = meta[r["index"]]
         d = {k: r.get(k) for k in EPISODE_FIELDS}
         d.update(scenario=m["id"], category=m["category"], road=m["road"], adhesion=m["adhesion"],
-                 params=m["params"], mu=m["mu"], target_speed=m.get("target_speed"))
+                 params=m["params"], driver=m.get("driver"), mu=m["mu"], target_speed=m.get("target_speed"))
         out.append(finite_or_none(d))
     return out
 
@@ -286,7 +321,7 @@ def write_episodes(table: Sequence[Mapping[str, Any]], out: Path) -> Tuple[Path,
         return path, "pyarrow is not installed: per-episode results written as CSV, not Parquet"
     cols = {k: [row.get(k) for row in table] for k in EPISODE_FIELDS}
     schema = pa.schema([
-        (k, pa.string()) if k in ("config", "scenario", "category", "road", "adhesion", "params",
+        (k, pa.string()) if k in ("config", "scenario", "category", "road", "adhesion", "params", "driver",
                                   "model", "cause", "failed_vehicle", "final_phase", "abort", "error")
         else (k, pa.bool_()) if k in ("upper_layer", "success", "at_rest", "boundary_violation", "secondary_collision")
         else (k, pa.uint64()) if k == "seed"
