@@ -182,6 +182,8 @@ def _fmt(v: Any, digits: int = 1) -> str:
         return "–"
     if isinstance(v, bool):
         return "yes" if v else "no"
+    if isinstance(v, str):
+        return v
     if isinstance(v, int):
         return str(v)
     return f"{v:.{digits}f}"
@@ -211,16 +213,35 @@ CAUSE_COLUMNS: Tuple[Tuple[str, str, int], ...] = tuple(
     (f"fail_{c}", c.replace("_", " ") + " %", 1) for c in CAUSES + (ERROR_CAUSE,)
 )
 
+SPEED_COLUMNS: Tuple[Tuple[str, str, int], ...] = (
+    ("band", "target speed", 0),
+    ("episodes", "episodes", 0),
+    ("success_rate", "success %", 1),
+    ("reversed_rate", "reversed %", 1),
+    ("reversed_speed_lost_median", "speed at reversal, lost", 1),
+    ("reversed_speed_success_median", "speed at reversal, success", 1),
+)
+DRIVER_COLUMNS: Tuple[Tuple[str, str, int], ...] = (
+    ("driver", "driver", 0),
+    ("episodes", "episodes", 0),
+    ("contact_rate", "contact %", 1),
+    ("reversed_rate", "reversed %", 1),
+    ("success_rate", "success %", 1),
+    ("reversed_success_rate", "reversed → success %", 1),
+)
+
 
 def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
              pairs: Optional[Mapping[str, Mapping[str, Any]]] = None) -> str:
     lines = [header] if header else []
 
-    def table(cols: Sequence[Tuple[str, str, int]]) -> None:
+    def table(cols: Sequence[Tuple[str, str, int]], groups: Optional[str] = None) -> None:
+        """One row per configuration, or with ``groups`` one per entry of its list of that name."""
         lines.append("| config | " + " | ".join(c[1] for c in cols) + " |")
         lines.append("|---|" + "---|" * len(cols))
         for name, s in summary.items():
-            lines.append(f"| {name} | " + " | ".join(_fmt(s.get(k), d) for k, _, d in cols) + " |")
+            for row in (s.get(groups, ()) if groups else (s,)):
+                lines.append(f"| {name} | " + " | ".join(_fmt(row.get(k), d) for k, _, d in cols) + " |")
         lines.append("")
 
     table(MAIN_COLUMNS)
@@ -236,26 +257,11 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
                  "(m/s) at the moment of reversal of the reversed targets lost afterwards and of the "
                  "successes:")
     lines.append("")
-    lines.append("| config | target speed | episodes | success % | reversed % | speed at reversal, lost | "
-                 "speed at reversal, success |")
-    lines.append("|---|---|---|---|---|---|---|")
-    for name, s in summary.items():
-        for b in s.get("by_speed", ()):
-            lines.append(f"| {name} | {b['band']} | {b['episodes']} | {_fmt(b['success_rate'])} | "
-                         f"{_fmt(b['reversed_rate'])} | {_fmt(b['reversed_speed_lost_median'])} | "
-                         f"{_fmt(b['reversed_speed_success_median'])} |")
-    lines.append("")
+    table(SPEED_COLUMNS, "by_speed")
     lines.append("By the target driver's kind: the shares touched, turned round and saved, and the share of "
                  "the turned-round targets saved:")
     lines.append("")
-    lines.append("| config | driver | episodes | contact % | reversed % | success % | reversed → success % |")
-    lines.append("|---|---|---|---|---|---|---|")
-    for name, s in summary.items():
-        for b in s.get("by_driver", ()):
-            lines.append(f"| {name} | {b['driver']} | {b['episodes']} | {_fmt(b['contact_rate'])} | "
-                         f"{_fmt(b['reversed_rate'])} | {_fmt(b['success_rate'])} | "
-                         f"{_fmt(b['reversed_success_rate'])} |")
-    lines.append("")
+    table(DRIVER_COLUMNS, "by_driver")
     if pairs:
         lines.append("Paired comparison (the same scenes and seeds; exact McNemar test on the scenes "
                      "only one of the two saved):")
