@@ -85,6 +85,10 @@ def test_bench_writes_the_tables_json_episodes_and_figures(bench_run):
         assert [b["driver"] for b in s["by_driver"]] == ["none", "lane_keep", "brake", "counter_steer"]
         assert sorted(b["driver"] for b in s["by_driver"] for _ in range(b["episodes"])) == kinds
     assert f"| picopinn | {kinds[0]} |" in md
+    # By the side of a curve: the touched curved scenes, each under one side.
+    for s in doc["configs"].values():
+        assert [b["curve_side"] for b in s["by_curve_side"]] == ["inside", "outside"]
+    assert "| picopinn | inside |" in md
     # Paired comparison: every pair once, its counts agree with the per-configuration successes.
     assert "Paired comparison" in md
     assert len(doc["paired"]) == len(PRESETS) * (len(PRESETS) - 1) // 2
@@ -360,6 +364,47 @@ def test_success_by_driver_counts_contacts_reversals_and_what_the_reversed_kept(
     md = markdown({"x": {"by_driver": list(b.values())}})
     assert "| x | brake | 3 | 66.7 | 66.7 | 33.3 | 50.0 |" in md
     assert "| x | none | 0 | – | – | – | – |" in md
+
+
+def test_curve_side_is_the_side_of_the_curve_the_first_contact_came_from():
+    from picopit.bench import curve_direction
+    from picopit.bench_summary import by_curve_side, curve_side, episode_table, markdown
+
+    assert curve_direction({"road": {"radius": -95.0}}) == -1.0
+    assert curve_direction({"road": {"radius": 250.0}}) == 1.0
+    assert curve_direction({"road": {"lanes": 2}}) is None
+    left, right, straight = {"curve": 1.0}, {"curve": -1.0}, {"curve": None}
+    # impact_y > 0: the bullet touched the target's left side.
+    assert curve_side({"contacts": 1, "impact_y": 0.9}, left) == "inside"
+    assert curve_side({"contacts": 1, "impact_y": -0.9}, left) == "outside"
+    assert curve_side({"contacts": 1, "impact_y": 0.9}, right) == "outside"
+    assert curve_side({"contacts": 2, "impact_y": -0.9}, right) == "inside"
+    assert curve_side({"contacts": 1, "impact_y": 0.9}, straight) is None
+    assert curve_side({"contacts": 0, "impact_y": None}, left) is None
+    assert curve_side({"contacts": 1, "impact_y": float("nan")}, left) is None
+
+    meta = {0: left, 1: right, 2: right, 3: left, 4: straight, 5: left}
+    rows = [
+        {"index": 0, "success": True, "contacts": 1, "impact_y": 0.8, "reversed_at": 4.0},  # inside, saved
+        {"index": 1, "success": False, "contacts": 1, "impact_y": 0.8, "reversed_at": 5.0},  # outside, lost after
+        {"index": 2, "success": False, "contacts": 1, "impact_y": 0.7, "reversed_at": None},  # outside, in the push
+        {"index": 3, "success": True, "contacts": 1, "impact_y": -0.8, "reversed_at": 4.5},  # outside, saved
+        {"index": 4, "success": True, "contacts": 1, "impact_y": 0.8, "reversed_at": 4.0},  # straight: left out
+        {"index": 5, "success": False, "contacts": 0, "impact_y": None, "reversed_at": None},  # untouched: left out
+    ]
+    b = {x["curve_side"]: x for x in by_curve_side(rows, meta)}
+    assert list(b) == ["inside", "outside"]
+    assert (b["inside"]["episodes"], b["inside"]["success_rate"], b["inside"]["reversed_success_rate"]) == (1, 100.0, 100.0)
+    assert b["outside"]["episodes"] == 3
+    assert b["outside"]["reversed_rate"] == pytest.approx(200 / 3)
+    assert b["outside"]["success_rate"] == pytest.approx(100 / 3)
+    assert b["outside"]["reversed_success_rate"] == pytest.approx(50.0)
+    md = markdown({"x": {"by_curve_side": list(b.values())}})
+    assert "| x | outside | 3 | 66.7 | 33.3 | 50.0 |" in md
+    meta_full = {i: {**m, "id": f"sc-{i}", "category": "curved", "road": "curved", "adhesion": "high",
+                     "params": "full_size", "mu": 0.9} for i, m in meta.items()}
+    assert [e["curve_side"] for e in episode_table(rows, meta_full)] == [
+        "inside", "outside", "outside", "outside", None, None]
 
 
 def test_controller_settings_files_override_the_presets_and_bad_ones_are_named(tmp_path, monkeypatch, capsys):

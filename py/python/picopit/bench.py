@@ -371,12 +371,20 @@ def load_scenes(cfg: BenchConfig) -> Tuple[List[Dict[str, Any]], List[int]]:
     return scenarios, scenes
 
 
+def curve_direction(scenario: Mapping[str, Any]) -> Optional[float]:
+    """+1 for a road curving left, −1 right (the sign of ``road.radius``), None if straight."""
+    radius = (scenario.get("road") or {}).get("radius")
+    return math.copysign(1.0, radius) if radius else None
+
+
 def run(cfg: BenchConfig, progress: bool = True) -> BenchResult:
     t0 = time.perf_counter()
     scenarios, scenes = load_scenes(cfg)
     meta = {i: {"id": scenarios[i]["id"], "category": scenarios[i]["category"],
                 "road": road_type(scenarios[i]["category"]), "adhesion": scenarios[i]["adhesion"],
-                "params": scenarios[i]["params"], "driver": (scenarios[i].get("driver") or {}).get("kind"), "mu": scenarios[i]["mu"],
+                "params": scenarios[i]["params"], "driver": (scenarios[i].get("driver") or {}).get("kind"),
+                "curve": curve_direction(scenarios[i]),
+                "mu": scenarios[i]["mu"],
                 "target_speed": math.hypot(scenarios[i]["target"]["vx"], scenarios[i]["target"]["vy"])}
             for i in scenes}
     models = str(cfg.models.resolve())

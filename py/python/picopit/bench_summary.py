@@ -3,8 +3,9 @@ comparison, and the tables and files they are written to.
 
 * ``summarise``: one row of metrics per configuration (success overall, by road and adhesion
   band, heading error, safety margin, violation and collision rates, pooled planning and control
-  times, failure causes, the funnel, ``by_speed``: by the target's initial speed, and
-  ``by_driver``: by the target driver's kind);
+  times, failure causes, the funnel, ``by_speed``: by the target's initial speed,
+  ``by_driver``: by the target driver's kind, and ``by_curve_side``: the curved scenes by the
+  side of the curve the first contact came from);
 * ``paired`` and ``mcnemar_exact_p``: every pair of configurations on the scenes both ran;
 * ``markdown`` and ``write_csv``: ``summary.md`` and ``summary.csv``;
 * ``episode_table`` and ``write_episodes``: ``episodes.parquet`` (``episodes.csv`` without
@@ -32,6 +33,8 @@ SPEED_BANDS: Tuple[Tuple[str, float, float], ...] = (
     ("< 10", 0.0, 10.0), ("10–15", 10.0, 15.0), ("15–20", 15.0, 20.0), ("≥ 20", 20.0, math.inf))
 # The target driver's kinds (the scenarios' ``driver.kind``), in the order the tables list them.
 DRIVERS = ("none", "lane_keep", "brake", "counter_steer")
+# The side of a curve a push came from (``curve_side``), in the order the tables list them.
+CURVE_SIDES = ("inside", "outside")
 CAUSES = ("decision_infeasible", "no_termination", "boundary_violation", "secondary_collision",
           "unsafe_rebound")
 ERROR_CAUSE = "error"
@@ -101,6 +104,7 @@ def summarise(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str,
         s["funnel"] = funnel.funnel(rs)
         s["by_speed"] = by_speed(rs, meta)
         s["by_driver"] = by_driver(rs, meta)
+        s["by_curve_side"] = by_curve_side(rs, meta)
         out[name] = s
     return out
 
@@ -138,14 +142,40 @@ def by_driver(rs: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str, A
     out = []
     for kind in DRIVERS:
         sub = [r for r in rs if meta[r["index"]].get("driver") == kind]
-        rev = [r for r in sub if _reversed(r)]
-        out.append({
-            "driver": kind, "episodes": len(sub),
-            "contact_rate": _pct(sum((r.get("contacts") or 0) > 0 for r in sub), len(sub)),
-            "reversed_rate": _pct(len(rev), len(sub)),
+        out.append({"driver": kind, "episodes": len(sub),
+                    "contact_rate": _pct(sum((r.get("contacts") or 0) > 0 for r in sub), len(sub)),
+                    **_reversal_shares(sub)})
+    return out
+
+
+def _reversal_shares(sub: Sequence[Mapping[str, Any]]) -> Dict[str, Optional[float]]:
+    """The shares (%) of ``sub`` turned round and saved, and of its turned-round targets saved."""
+    rev = [r for r in sub if _reversed(r)]
+    return {"reversed_rate": _pct(len(rev), len(sub)),
             "success_rate": _pct(sum(bool(r["success"]) for r in sub), len(sub)),
-            "reversed_success_rate": _pct(sum(bool(r["success"]) for r in rev), len(rev)),
-        })
+            "reversed_success_rate": _pct(sum(bool(r["success"]) for r in rev), len(rev))}
+
+
+def curve_side(r: Mapping[str, Any], meta: Mapping[str, Any]) -> Optional[str]:
+    """The side of its road's curve an episode's first contact came from: ``"inside"`` when the
+    bullet touched the target on the side the curve turns to (the contact point's ``impact_y``,
+    positive on the target's left, against the sign of the road's ``radius``, positive turning
+    left), ``"outside"`` on the other; ``None`` on a straight road or without a contact."""
+    turn, y = meta.get("curve"), _finite(r.get("impact_y"))
+    if not turn or not (r.get("contacts") or 0) > 0 or y is None or y == 0.0:
+        return None
+    return "inside" if (y > 0) == (turn > 0) else "outside"
+
+
+def by_curve_side(rs: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str, Any]]) -> List[Dict[str, Any]]:
+    """One configuration's touched curved scenes by the side of the curve the first contact came
+    from (``CURVE_SIDES``): how many, the shares turned round and saved, and the share of the
+    turned-round targets saved. Pushed from the inside, the target's nose turns into the curve;
+    from the outside it turns out, and the spin carries the target towards the outer edge."""
+    out = []
+    for side in CURVE_SIDES:
+        sub = [r for r in rs if curve_side(r, meta[r["index"]]) == side]
+        out.append({"curve_side": side, "episodes": len(sub), **_reversal_shares(sub)})
     return out
 
 
@@ -229,6 +259,13 @@ DRIVER_COLUMNS: Tuple[Tuple[str, str, int], ...] = (
     ("success_rate", "success %", 1),
     ("reversed_success_rate", "reversed → success %", 1),
 )
+CURVE_SIDE_COLUMNS: Tuple[Tuple[str, str, int], ...] = (
+    ("curve_side", "first contact from", 0),
+    ("episodes", "episodes", 0),
+    ("reversed_rate", "reversed %", 1),
+    ("success_rate", "success %", 1),
+    ("reversed_success_rate", "reversed → success %", 1),
+)
 
 
 def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
@@ -262,6 +299,11 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
                  "the turned-round targets saved:")
     lines.append("")
     table(DRIVER_COLUMNS, "by_driver")
+    lines.append("Curved scenes with a contact, by the side of the curve the first contact came from "
+                 "(inside: the bullet on the side the road turns to): the shares turned round and saved, "
+                 "and the share of the turned-round targets saved:")
+    lines.append("")
+    table(CURVE_SIDE_COLUMNS, "by_curve_side")
     if pairs:
         lines.append("Paired comparison (the same scenes and seeds; exact McNemar test on the scenes "
                      "only one of the two saved):")
@@ -277,9 +319,9 @@ def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
 
 def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     """The scalar metrics, one row per configuration (the funnel's stage counts flattened to
-    ``funnel_<stage>``; its losses, the speed bands and the drivers are in summary.json and
-    summary.md)."""
-    flat = {name: {**{k: v for k, v in s.items() if k not in ("funnel", "by_speed", "by_driver")},
+    ``funnel_<stage>``; its losses, the speed bands, the drivers and the curve sides are in
+    summary.json and summary.md)."""
+    flat = {name: {**{k: v for k, v in s.items() if k not in ("funnel", "by_speed", "by_driver", "by_curve_side")},
                    **{f"funnel_{st}": s["funnel"][st] for st in funnel.STAGES if "funnel" in s}}
             for name, s in summary.items()}
     summary = flat
@@ -291,7 +333,8 @@ def write_csv(summary: Mapping[str, Mapping[str, Any]], path: Path) -> None:
             w.writerow([name] + ["" if s.get(k) is None else s.get(k) for k in keys])
 
 
-EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion", "params", "driver", "mu",
+EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion", "params", "driver",
+                  "curve_side", "mu",
                   "target_speed",
                   "seed", "model", "param_count", "upper_layer", "success", "at_rest", "cause", "decided_at",
                   "terminal_heading_error", "min_margin", "boundary_violation", "secondary_collision",
@@ -308,7 +351,8 @@ def episode_table(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[
         m = meta[r["index"]]
         d = {k: r.get(k) for k in EPISODE_FIELDS}
         d.update(scenario=m["id"], category=m["category"], road=m["road"], adhesion=m["adhesion"],
-                 params=m["params"], driver=m.get("driver"), mu=m["mu"], target_speed=m.get("target_speed"))
+                 params=m["params"], driver=m.get("driver"), curve_side=curve_side(r, m), mu=m["mu"],
+                 target_speed=m.get("target_speed"))
         out.append(finite_or_none(d))
     return out
 
@@ -328,7 +372,7 @@ def write_episodes(table: Sequence[Mapping[str, Any]], out: Path) -> Tuple[Path,
     cols = {k: [row.get(k) for row in table] for k in EPISODE_FIELDS}
     schema = pa.schema([
         (k, pa.string()) if k in ("config", "scenario", "category", "road", "adhesion", "params", "driver",
-                                  "model", "cause", "failed_vehicle", "final_phase", "abort", "error")
+                                  "curve_side", "model", "cause", "failed_vehicle", "final_phase", "abort", "error")
         else (k, pa.bool_()) if k in ("upper_layer", "success", "at_rest", "boundary_violation", "secondary_collision")
         else (k, pa.uint64()) if k == "seed"
         else (k, pa.int64()) if k in ("index", "param_count", "contacts", "control_steps", "plan_count",
