@@ -251,21 +251,21 @@ SPEED_COLUMNS: Tuple[Tuple[str, str, int], ...] = (
     ("reversed_speed_lost_median", "speed at reversal, lost", 1),
     ("reversed_speed_success_median", "speed at reversal, success", 1),
 )
+# The columns of ``_reversal_shares``.
+REVERSAL_SHARE_COLUMNS: Tuple[Tuple[str, str, int], ...] = (
+    ("reversed_rate", "reversed %", 1),
+    ("success_rate", "success %", 1),
+    ("reversed_success_rate", "reversed → success %", 1),
+)
 DRIVER_COLUMNS: Tuple[Tuple[str, str, int], ...] = (
     ("driver", "driver", 0),
     ("episodes", "episodes", 0),
     ("contact_rate", "contact %", 1),
-    ("reversed_rate", "reversed %", 1),
-    ("success_rate", "success %", 1),
-    ("reversed_success_rate", "reversed → success %", 1),
-)
+) + REVERSAL_SHARE_COLUMNS
 CURVE_SIDE_COLUMNS: Tuple[Tuple[str, str, int], ...] = (
     ("curve_side", "first contact from", 0),
     ("episodes", "episodes", 0),
-    ("reversed_rate", "reversed %", 1),
-    ("success_rate", "success %", 1),
-    ("reversed_success_rate", "reversed → success %", 1),
-)
+) + REVERSAL_SHARE_COLUMNS
 
 
 def markdown(summary: Mapping[str, Mapping[str, Any]], header: str = "",
