@@ -4,6 +4,13 @@
 //! `δ = L κ(s) + g (−k_d (d − offset) − k_ψ wrap(ψ − ψ_road) − k_r (r − v_x κ))`, clamped to
 //! `±LANE_KEEP_MAX_STEER`: `L` the wheelbase, `(s, d, ψ_road, κ)` the target's Frenet
 //! projection, `g` the driver's gain.
+//!
+//! The law is a driver's lane keeping, which has no meaning once the car points across the
+//! road: the steer is scaled by `c = clamp(2 cos e_ψ, 0, 1)`, `e_ψ = wrap(ψ − ψ_road)`, whole
+//! up to 60° of heading error and faded to zero at 90°. Beyond 90° the driver has let go of
+//! the wheel. Without the fade the saturated steer would flip sign as the wrapped error passes
+//! ±180° and would steer a car rolling backwards as if it rolled forwards, where a steered
+//! front axle turns it the other way ([`lane_keep_fade`]).
 
 use crate::road::Frenet;
 use crate::target::{idx, TargetState};
@@ -18,6 +25,21 @@ pub const LANE_KEEP_KR: f64 = 0.1;
 /// Largest steer (rad): a driver's corrections, not a spin recovery.
 pub const LANE_KEEP_MAX_STEER: f64 = 0.15;
 
+/// The lane keeper's share of its law at heading error `e_psi` (rad, wrapped) and its
+/// derivative: `c = clamp(2 cos e_ψ, 0, 1)`, 1 up to 60°, 0 from 90° on.
+#[must_use]
+pub fn lane_keep_fade(e_psi: f64) -> (f64, f64) {
+    let (sin, cos) = e_psi.sin_cos();
+    let c = 2.0 * cos;
+    if c >= 1.0 {
+        (1.0, 0.0)
+    } else if c <= 0.0 {
+        (0.0, 0.0)
+    } else {
+        (c, -2.0 * sin)
+    }
+}
+
 /// A lane keeper following the line `d = offset` with gain `gain`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LaneKeeper {
@@ -30,19 +52,21 @@ impl LaneKeeper {
     /// The steer (rad) at state `x` whose Frenet projection is `f`.
     #[must_use]
     pub fn steer(&self, x: &TargetState, f: &Frenet) -> f64 {
-        self.unclamped(x, f)
-            .clamp(-LANE_KEEP_MAX_STEER, LANE_KEEP_MAX_STEER)
+        let (law, e_psi) = self.law(x, f);
+        (lane_keep_fade(e_psi).0 * law).clamp(-LANE_KEEP_MAX_STEER, LANE_KEEP_MAX_STEER)
     }
 
     /// The steer and its gradient with respect to the state (zero where the steer is
-    /// clamped). The road heading turns with the position (∂ψ_road/∂s = κ); the change of
+    /// clamped or faded out). The road heading turns with the position (∂ψ_road/∂s = κ); the change of
     /// the curvature itself along a clothoid is not differentiated.
     #[must_use]
     pub fn steer_and_gradient(&self, x: &TargetState, f: &Frenet) -> (f64, SVector<f64, 8>) {
-        let raw = self.unclamped(x, f);
+        let (law, e_psi) = self.law(x, f);
+        let (fade, dfade) = lane_keep_fade(e_psi);
+        let raw = fade * law;
         let steer = raw.clamp(-LANE_KEEP_MAX_STEER, LANE_KEEP_MAX_STEER);
         let mut g = SVector::<f64, 8>::zeros();
-        if raw.abs() < LANE_KEEP_MAX_STEER {
+        if raw.abs() < LANE_KEEP_MAX_STEER && fade > 0.0 {
             let (sin, cos) = f.heading.sin_cos();
             // d grows to the left of the road heading: ∂d/∂(X, Y) = (−sin, cos); the foot
             // point moves by ∂s/∂(X, Y) = (cos, sin)/(1 − κ d), turning the road heading.
@@ -52,16 +76,22 @@ impl LaneKeeper {
             g[idx::R] = -self.gain * LANE_KEEP_KR;
             g[idx::X] = self.gain * (LANE_KEEP_KD * sin + LANE_KEEP_KPSI * turn * cos);
             g[idx::Y] = self.gain * (-LANE_KEEP_KD * cos + LANE_KEEP_KPSI * turn * sin);
+            // The fade: ∂c/∂x = c'(e_ψ) ∂e_ψ/∂x with ∂e_ψ/∂(ψ, X, Y) = (1, −turn cos, −turn sin).
+            g *= fade;
+            g[idx::PSI] += law * dfade;
+            g[idx::X] -= law * dfade * turn * cos;
+            g[idx::Y] -= law * dfade * turn * sin;
         }
         (steer, g)
     }
 
-    fn unclamped(&self, x: &TargetState, f: &Frenet) -> f64 {
+    /// The unfaded, unclamped law and the wrapped heading error.
+    fn law(&self, x: &TargetState, f: &Frenet) -> (f64, f64) {
         let e_d = f.d - self.offset;
         let e_psi = crate::wrap_angle(x[idx::PSI] - f.heading);
         let r_ref = x[idx::VX] * f.curvature;
         let fb = -LANE_KEEP_KD * e_d - LANE_KEEP_KPSI * e_psi - LANE_KEEP_KR * (x[idx::R] - r_ref);
-        self.wheelbase * f.curvature + self.gain * fb
+        (self.wheelbase * f.curvature + self.gain * fb, e_psi)
     }
 }
 
@@ -115,5 +145,74 @@ mod tests {
         let (s, g) = lk.steer_and_gradient(&x, &f);
         assert_eq!(s, -LANE_KEEP_MAX_STEER);
         assert_eq!(g, SVector::<f64, 8>::zeros());
+        // In the fade (between 60° and 90° of heading error), unclamped: the fade's
+        // derivative is part of the gradient.
+        x[idx::PSI] = f.heading + 1.53;
+        let (s, g) = lk.steer_and_gradient(&x, &f);
+        let (fade, _) = lane_keep_fade(1.53);
+        assert!(
+            fade > 0.0 && fade < 1.0 && s.abs() < LANE_KEEP_MAX_STEER,
+            "{fade} {s}"
+        );
+        for i in 0..8 {
+            let h = 1e-6;
+            let (mut p, mut m) = (x, x);
+            p[i] += h;
+            m[i] -= h;
+            let fp = road.project(Vec2::new(p[idx::X], p[idx::Y]));
+            let fm = road.project(Vec2::new(m[idx::X], m[idx::Y]));
+            let fd = (lk.steer(&p, &fp) - lk.steer(&m, &fm)) / (2.0 * h);
+            assert!(
+                (fd - g[i]).abs() < 1e-6,
+                "faded ∂δ/∂x[{i}]: {} vs {fd}",
+                g[i]
+            );
+        }
+    }
+
+    /// The whole law up to 60° of heading error, nothing from 90° on (either way round, also
+    /// across the ±180° wrap where the unfaded law's saturated steer flips sign), and a
+    /// continuous steer in between.
+    #[test]
+    fn the_lane_keeper_lets_go_once_the_car_points_across_the_road() {
+        let road = Road::new(RoadSpec {
+            segments: vec![SegmentSpec::Straight { length: 300.0 }],
+            lanes: 2,
+            lane_width: 3.5,
+            shoulder: 0.5,
+            origin: [0.0, 0.0, 0.0],
+        })
+        .unwrap();
+        let lk = LaneKeeper {
+            offset: 1.75,
+            gain: 1.0,
+            wheelbase: 2.7,
+        };
+        let steer_at = |psi: f64, vx: f64| {
+            let mut x = TargetState::zeros();
+            x.copy_from_slice(&[vx, 0.0, psi, 0.0, 0.0, 0.0, 100.0, 1.0]);
+            lk.steer(&x, &road.project(Vec2::new(100.0, 1.0)))
+        };
+        // Up to 60° the law is whole: −k_d (1 − 1.75) − k_ψ ψ, clamped.
+        for psi in [-1.0, -0.3, 0.0, 0.3, 1.0] {
+            let law = -LANE_KEEP_KD * (1.0 - 1.75) - LANE_KEEP_KPSI * psi;
+            let want = law.clamp(-LANE_KEEP_MAX_STEER, LANE_KEEP_MAX_STEER);
+            assert!((steer_at(psi, 15.0) - want).abs() < 1e-12, "ψ {psi}");
+        }
+        // From 90° on, hands off, rolling forwards or backwards.
+        for psi in [1.58, 2.5, 3.1, 3.2, -3.1, -2.0, -1.58] {
+            assert_eq!(steer_at(psi, 8.0), 0.0, "ψ {psi}");
+            assert_eq!(steer_at(psi, -8.0), 0.0, "ψ {psi}");
+        }
+        // Continuous through the fade.
+        let mut last = steer_at(1.0, 15.0);
+        for k in 1..=200 {
+            let psi = 1.0 + 0.6 * f64::from(k) / 200.0;
+            let s = steer_at(psi, 15.0);
+            assert!((s - last).abs() < 0.01, "jump at ψ {psi}: {last} → {s}");
+            last = s;
+        }
+        assert_eq!(lane_keep_fade(0.5), (1.0, 0.0));
+        assert_eq!(lane_keep_fade(std::f64::consts::PI), (0.0, 0.0));
     }
 }

@@ -21,7 +21,9 @@ pub enum Trigger {
 /// The target driver. Before its reaction every driver but `none` keeps its lane (steer
 /// toward the line `d = offset`, see [`TargetDriver`]); the reaction is:
 /// * `none`: an incapacitated or fleeing driver off the controls, holding a fixed small steer;
-/// * `lane_keep`: keeps steering for its lane throughout, also after being hit;
+/// * `lane_keep`: keeps steering for its lane throughout, also after being hit, until the
+///   car points across the road (the law fades out between 60° and 90° of heading error,
+///   [`dynamics::driver::lane_keep_fade`]);
 /// * `brake`: from its onset brakes with `fraction` of the maximum brake torque (still
 ///   steering for the lane before the first contact, hands off after it);
 /// * `counter_steer`: from `delay` after the first contact steers against the yaw rate,
@@ -128,7 +130,9 @@ impl DriverDef {
 ///
 /// Lane keeping: `δ = L κ(s) + g (−k_d (d − offset) − k_ψ wrap(ψ − ψ_road) − k_r (r − v κ))`
 /// with `L` the wheelbase, `k_d = 0.05 rad/m`, `k_ψ = 0.6`, `k_r = 0.1 s`, scaled by the
-/// driver's gain `g`, clamped to `±0.15 rad` (a driver's corrections, not a spin recovery).
+/// driver's gain `g`, scaled by `clamp(2 cos wrap(ψ − ψ_road), 0, 1)` (whole up to 60° of
+/// heading error, hands off from 90°) and clamped to `±0.15 rad` (a driver's corrections, not
+/// a spin recovery).
 #[derive(Debug, Clone, Copy)]
 pub struct TargetDriver {
     def: DriverDef,
