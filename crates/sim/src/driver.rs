@@ -21,9 +21,10 @@ pub enum Trigger {
 /// The target driver. Before its reaction every driver but `none` keeps its lane (steer
 /// toward the line `d = offset`, see [`TargetDriver`]); the reaction is:
 /// * `none`: an incapacitated or fleeing driver off the controls, holding a fixed small steer;
-/// * `lane_keep`: keeps steering for its lane throughout, also after being hit, until the
-///   car points across the road (the law fades out between 60° and 90° of heading error,
-///   [`dynamics::driver::lane_keep_fade`]);
+/// * `lane_keep`: keeps steering for its lane throughout, also after being hit: in the
+///   direction the car travels, so a car spun round and rolling backwards is steered by the
+///   mirrored law, and not while it travels across the road (the law fades out between 60°
+///   and 90° of heading error to the direction of travel; [`dynamics::driver::LaneKeeper`]);
 /// * `brake`: from its onset brakes with `fraction` of the maximum brake torque (still
 ///   steering for the lane before the first contact, hands off after it);
 /// * `counter_steer`: from `delay` after the first contact steers against the yaw rate,
@@ -128,11 +129,12 @@ impl DriverDef {
 /// and `k = 1 /s`. Without the throttle a car in gear is slowed by its engine (and stalls
 /// once spun round); see `dynamics::params::PowertrainParams`.
 ///
-/// Lane keeping: `δ = L κ(s) + g (−k_d (d − offset) − k_ψ wrap(ψ − ψ_road) − k_r (r − v κ))`
-/// with `L` the wheelbase, `k_d = 0.05 rad/m`, `k_ψ = 0.6`, `k_r = 0.1 s`, scaled by the
-/// driver's gain `g`, scaled by `clamp(2 cos wrap(ψ − ψ_road), 0, 1)` (whole up to 60° of
-/// heading error, hands off from 90°) and clamped to `±0.15 rad` (a driver's corrections, not
-/// a spin recovery).
+/// Lane keeping, rolling forwards: `δ = L κ(s) + g (−k_d (d − offset) − k_ψ wrap(ψ − ψ_road)
+/// − k_r (r − v κ))` with `L` the wheelbase, `k_d = 0.05 rad/m`, `k_ψ = 0.6`, `k_r = 0.1 s`,
+/// scaled by the driver's gain `g` and clamped to `±0.15 rad` (a driver's corrections, not a
+/// spin recovery); rolling backwards the same law about the reversed heading with the steer's
+/// sign turned round; faded out as the heading error to the direction of travel grows from
+/// 60° to 90° ([`dynamics::driver::LaneKeeper`]).
 #[derive(Debug, Clone, Copy)]
 pub struct TargetDriver {
     def: DriverDef,
@@ -248,7 +250,7 @@ impl TargetDriver {
 
 /// Below this body-frame speed (m/s) the counter-steer fades out and turns round with the
 /// direction of travel ([`counter_steer`]).
-pub const COUNTER_STEER_REVERSE_BLEND: f64 = 0.5;
+pub const COUNTER_STEER_REVERSE_BLEND: f64 = dynamics::driver::REVERSE_BLEND;
 
 /// The counter-steering driver's wheel angle: against the yaw rate `r`,
 /// `δ = clamp(−gain · r · σ(v_x), ±max_steer)` with `σ = clamp(v_x / 0.5 m/s, −1, 1)`.

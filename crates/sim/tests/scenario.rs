@@ -288,3 +288,47 @@ fn a_counter_steering_driver_slows_the_yaw_rolling_forwards_and_backwards() {
         "rolling backwards the bare law turned {bare_back:.3} rad, hands off {off_back:.3} rad"
     );
 }
+
+/// A lane-keeping target spun round by a push, rolling backwards at 8 m/s with its heading
+/// 7° off the reversed one (its course drifting towards the right edge), keeps steering for
+/// its lane in the direction it travels: over 3 s it strays less far from its lane than a
+/// driver off the controls, who lets the car roll on along its course towards the edge.
+#[test]
+fn a_lane_keeping_driver_steers_a_car_rolling_backwards_by_its_course() {
+    use dynamics::plant::VehicleInit;
+    let v = common::straight();
+    let sc = Scenario::from_json_line(&v.to_string(), 1).unwrap();
+    let params = sc.params.load().unwrap();
+    let road = sc.build_road().unwrap();
+    let (_, ti) = sc.initial_states(&road);
+    let heading = ti.yaw + std::f64::consts::PI - 0.12;
+    // The lateral offset from the lane (d, offset 0) after 3 s from the spun state, with the
+    // driver's own steer or none; the pedals left alone, the engine stalled in gear.
+    let drift = |hands_off: bool| -> f64 {
+        let init = VehicleInit {
+            yaw: heading,
+            vx: -8.0,
+            r: 0.0,
+            ..ti
+        };
+        let mut plant = common::target_alone(&sc, &params, &init);
+        let mut driver = sc.target_driver(&params);
+        let mut worst: f64 = 0.0;
+        for k in 0..60 {
+            let x = plant.target_state();
+            let (own, tb) = driver.command(5.0 + k as f64 * 0.05, Some(1.0), &x, &road);
+            assert!(tb.abs() < 1e-12, "off the throttle after the contact");
+            plant.set_target_command(if hands_off { 0.0 } else { own }, 0.0);
+            plant.advance(0.05);
+            let x = plant.target_state();
+            let f = road.project(dynamics::geometry::Vec2::new(x[6], x[7]));
+            worst = worst.max(f.d.abs());
+        }
+        worst
+    };
+    let (kept, off) = (drift(false), drift(true));
+    assert!(
+        kept < 0.7 * off && off > 1.0,
+        "lane keeping drifted {kept:.2} m, hands off {off:.2} m"
+    );
+}
