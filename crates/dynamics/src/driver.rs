@@ -150,16 +150,7 @@ mod tests {
         let (s, g) = lk.steer_and_gradient(&x, &f);
         assert!(s.abs() < LANE_KEEP_MAX_STEER, "not clamped: {s}");
         assert_eq!(s, lk.steer(&x, &f));
-        for i in 0..8 {
-            let h = 1e-5;
-            let (mut p, mut m) = (x, x);
-            p[i] += h;
-            m[i] -= h;
-            let fp = road.project(Vec2::new(p[idx::X], p[idx::Y]));
-            let fm = road.project(Vec2::new(m[idx::X], m[idx::Y]));
-            let fd = (lk.steer(&p, &fp) - lk.steer(&m, &fm)) / (2.0 * h);
-            assert!((fd - g[i]).abs() < 1e-7, "∂δ/∂x[{i}]: {} vs {fd}", g[i]);
-        }
+        assert_gradient(&lk, &road, &x, &g, 1e-5, 1e-7, "");
         // Clamped: no gradient.
         x[idx::PSI] = 1.0;
         let (s, g) = lk.steer_and_gradient(&x, &f);
@@ -180,20 +171,41 @@ mod tests {
                 s.abs() < LANE_KEEP_MAX_STEER && s != 0.0,
                 "ψ {psi}, v_x {vx}: {s}"
             );
-            for i in 0..8 {
-                let h = 1e-6;
-                let (mut p, mut m) = (x, x);
-                p[i] += h;
-                m[i] -= h;
-                let fp = road.project(Vec2::new(p[idx::X], p[idx::Y]));
-                let fm = road.project(Vec2::new(m[idx::X], m[idx::Y]));
-                let fd = (lk.steer(&p, &fp) - lk.steer(&m, &fm)) / (2.0 * h);
-                assert!(
-                    (fd - g[i]).abs() < 1e-6,
-                    "ψ {psi}, v_x {vx}: ∂δ/∂x[{i}]: {} vs {fd}",
-                    g[i]
-                );
-            }
+            assert_gradient(
+                &lk,
+                &road,
+                &x,
+                &g,
+                1e-6,
+                1e-6,
+                &format!("ψ {psi}, v_x {vx}"),
+            );
+        }
+    }
+
+    /// `g` against central differences (step `h`, tolerance `tol`) of the steer, with the
+    /// road re-projected at every perturbed state.
+    fn assert_gradient(
+        lk: &LaneKeeper,
+        road: &Road,
+        x: &TargetState,
+        g: &SVector<f64, 8>,
+        h: f64,
+        tol: f64,
+        label: &str,
+    ) {
+        for i in 0..8 {
+            let (mut p, mut m) = (*x, *x);
+            p[i] += h;
+            m[i] -= h;
+            let fp = road.project(Vec2::new(p[idx::X], p[idx::Y]));
+            let fm = road.project(Vec2::new(m[idx::X], m[idx::Y]));
+            let fd = (lk.steer(&p, &fp) - lk.steer(&m, &fm)) / (2.0 * h);
+            assert!(
+                (fd - g[i]).abs() < tol,
+                "{label} ∂δ/∂x[{i}]: {} vs {fd}",
+                g[i]
+            );
         }
     }
 
