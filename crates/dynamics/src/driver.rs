@@ -209,6 +209,19 @@ mod tests {
         }
     }
 
+    /// The steer of a lane keeper of the line d = 1.75 m (gain 1, wheelbase 2.7 m) on
+    /// [`straight`] at station 100 m, lateral offset `y`, heading `psi`, speed `vx`, yaw rate `r`.
+    fn steer_on_straight(psi: f64, vx: f64, r: f64, y: f64) -> f64 {
+        let lk = LaneKeeper {
+            offset: 1.75,
+            gain: 1.0,
+            wheelbase: 2.7,
+        };
+        let mut x = TargetState::zeros();
+        x.copy_from_slice(&[vx, 0.0, psi, r, 0.0, 0.0, 100.0, y]);
+        lk.steer(&x, &straight().project(Vec2::new(100.0, y)))
+    }
+
     fn straight() -> Road {
         Road::new(RoadSpec {
             segments: vec![SegmentSpec::Straight { length: 300.0 }],
@@ -225,17 +238,7 @@ mod tests {
     /// continuous steer in between.
     #[test]
     fn the_lane_keeper_lets_go_once_the_car_travels_across_the_road() {
-        let road = straight();
-        let lk = LaneKeeper {
-            offset: 1.75,
-            gain: 1.0,
-            wheelbase: 2.7,
-        };
-        let steer_at = |psi: f64, vx: f64| {
-            let mut x = TargetState::zeros();
-            x.copy_from_slice(&[vx, 0.0, psi, 0.0, 0.0, 0.0, 100.0, 1.0]);
-            lk.steer(&x, &road.project(Vec2::new(100.0, 1.0)))
-        };
+        let steer_at = |psi: f64, vx: f64| steer_on_straight(psi, vx, 0.0, 1.0);
         // Up to 60° the law is whole: −k_d (1 − 1.75) − k_ψ ψ, clamped.
         for psi in [-1.0, -0.3, 0.0, 0.3, 1.0] {
             let law = -LANE_KEEP_KD * (1.0 - 1.75) - LANE_KEEP_KPSI * psi;
@@ -264,17 +267,7 @@ mod tests {
     /// rolling backwards the other way), and it continues through a standstill.
     #[test]
     fn rolling_backwards_the_lane_keeper_steers_the_mirrored_law() {
-        let road = straight();
-        let lk = LaneKeeper {
-            offset: 1.75,
-            gain: 1.0,
-            wheelbase: 2.7,
-        };
-        let steer_at = |psi: f64, vx: f64, r: f64, y: f64| {
-            let mut x = TargetState::zeros();
-            x.copy_from_slice(&[vx, 0.0, psi, r, 0.0, 0.0, 100.0, y]);
-            lk.steer(&x, &road.project(Vec2::new(100.0, y)))
-        };
+        let steer_at = steer_on_straight;
         for (a, r, y) in [(0.1, 0.0, 1.0), (-0.12, 0.05, 2.5), (0.03, -0.1, -1.0)] {
             let fwd = steer_at(a, 8.0, r, y);
             let back = steer_at(std::f64::consts::PI + a, -8.0, r, y);
