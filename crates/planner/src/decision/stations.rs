@@ -115,11 +115,15 @@ impl Planner {
         let (band_lo, band_hi) = (c.rel_pos.x + lo - x0 - tol, c.rel_pos.x + hi - x0 + tol);
         let waiting = rel_vel.x.abs() < WAITING_SPEED * k.sqrt();
         let arrived = waiting && (band_lo..=band_hi).contains(&rel.x);
-        if dx.hypot(dy) < 0.3 * k || self.gap(xt, xb) < 0.1 * k {
+        // Touching counts on the side the bullet is on only: a bullet pressing on the
+        // target's right has not arrived on its left (a plan in contact that was not yet
+        // committed to a side took the far side's push for one under way).
+        let own_side = side.sign() * rel.y >= 0.0;
+        if dx.hypot(dy) < 0.3 * k || (own_side && self.gap(xt, xb) < 0.1 * k) {
             // At the contact pose, or touching already: a PIT under way.
             return (0.0, x_c);
         }
-        let along = if side.sign() * rel.y < 0.0 {
+        let along = if !own_side {
             // On the other side: drop back behind the target's rear first.
             let behind = -(self.params.target.length - self.params.target.cg_to_front)
                 - self.params.bullet.cg_to_front
@@ -368,5 +372,52 @@ impl Planner {
         } else {
             own
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dynamics::target4dof::FourDofTarget;
+
+    /// A bullet pressing on the target's right has arrived there, and only there: on the
+    /// left it still has to drop back behind the target and cross. (Counting the touch on
+    /// both sides let a plan in contact, not yet committed to a side, push from the far
+    /// side: `sc-01226` was planned from the left while the bullet pushed on the right.)
+    #[test]
+    fn touching_the_target_is_an_arrival_on_its_own_side_only() {
+        let params = ParamSet::builtin("full_size").unwrap();
+        let s = PlannerSettings::default();
+        let model = Box::new(FourDofTarget::new(&params.target, 0.9, s.dt));
+        let p = Planner::new(&params, 0.9, model, s).unwrap();
+        let road = Road::straight(3000.0, 3, 3.5, 1.0);
+        let mut xt = TargetState::zeros();
+        xt[idx::VX] = 20.0;
+        xt[idx::X] = 100.0;
+        // The bullet's inner front corner 2 cm into the target's right side, turned in by
+        // 12° (the contact pose of `mpc::reference`).
+        let x_touch = mpc::reference::rear_quarter_x(&params) + 0.9;
+        let pose = mpc::reference::pit_stage_at(
+            &params,
+            Side::Right,
+            x_touch,
+            12f64.to_radians(),
+            0.02,
+            1.0,
+            (0.0, 1.0),
+        );
+        let xb = dynamics::bullet::BulletState::from_column_slice(&[
+            xt[idx::X] + pose.rel_pos.x,
+            xt[idx::Y] + pose.rel_pos.y,
+            pose.rel_heading,
+            20.5,
+            0.0,
+            0.0,
+        ]);
+        assert!(p.gap(&xt, &xb) < 0.1, "touching: gap {}", p.gap(&xt, &xb));
+        let (own, _) = p.earliest_arrival(Side::Right, &road, &xt, &xb);
+        assert_eq!(own, 0.0, "in contact on its own side");
+        let (far, _) = p.earliest_arrival(Side::Left, &road, &xt, &xb);
+        assert!(far > 1.0, "the far side is a crossing away, not {far} s");
     }
 }
