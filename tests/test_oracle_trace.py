@@ -235,6 +235,30 @@ def test_trace_sets_each_plan_against_what_the_target_then_did():
     assert len(lines) == len(plans) and all(" off the prediction" in l for l in lines), lines
 
 
+def test_a_bullet_held_back_for_traffic_stays_behind_the_target_and_the_trace_says_so():
+    """`sc-00285`: cars stopped in the lanes ahead on a right-hand curve. The bullet, behind
+    the target in its lane, is held back there (its stand-off pose beside the target would
+    run into them) until the target has passed them; the plans record it, the plan lines
+    say it, and while held back the bullet stays behind the target's rear bumper."""
+    t = trace.trace(trace.find_scene(DATASET, "sc-00285"), "picopinn")
+    plans = t.result["plans"]
+    held = [p["hold_back"] for p in plans]
+    assert held[0] and not all(held), held
+    for p, line in zip(plans, t.plan_lines()):
+        assert ("held back behind the target" in line) == p["hold_back"], line
+    # The episode's summary (a column of the benchmark's episodes table) has the last one.
+    assert t.result["held_back_until"] == max(p["time"] for p in plans if p["hold_back"])
+    c = t.columns
+    release = next(p["time"] for p in plans if not p["hold_back"])
+    # In the target's frame: the bullet's c.g. ahead (+) or behind (-) the target's.
+    dx, dy = c["bullet_x"] - c["target_x"], c["bullet_y"] - c["target_y"]
+    ahead = np.cos(c["target_psi"]) * dx + np.sin(c["target_psi"]) * dy
+    during = (c["time"] >= 1.5) & (c["time"] < release)
+    assert during.sum() > 20
+    # 4.5 m: a car length, so the two do not overlap along the road.
+    assert ahead[during].max() < -4.5, ahead[during].max()
+
+
 def test_trace_runs_a_half_scale_trial_case_with_its_controller_settings(capsys):
     """The half-scale trials in process: the trial file, its controller settings TOML."""
     rc = cli.main(["trace", "R1", "--scenarios", str(TRIALS), "--every", "100",

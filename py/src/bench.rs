@@ -63,7 +63,7 @@ fn trajectory_columns() -> Vec<String> {
 /// name or a JSON configuration, `seed` seeds the sensing noise and actuator errors. With
 /// `record` the result holds the trajectory (one row per control step) and the upper
 /// layer's plans (`plans`: `time`, `mode`, `reason` (why an abort: the race lost or the
-/// infeasibility, else None), `side`, `push_from`, `push_to`, `push_peak`, `push_impulse` (∫F_n dt, N s),
+/// infeasibility, else None), `side`, `hold_back` (the bullet held back behind the target for an obstacle), `push_from`, `push_to`, `push_peak`, `push_impulse` (∫F_n dt, N s),
 /// `predicted_heading_error`, `predicted_time` and `predicted_target` (the plan's step times
 /// and predicted target states); empty without `record`). The GIL is
 /// released while the episode runs.
@@ -130,6 +130,7 @@ fn run_episode<'py>(
     d.set_item("abort", r.abort.as_deref())?;
     d.set_item("mpc_failures", r.mpc_failures)?;
     d.set_item("mpc_time_budget", r.mpc_time_budget)?;
+    d.set_item("held_back_until", r.held_back_until)?;
     d.set_item("wall_time", r.wall_time)?;
     d.set_item("plan_times_ms", PyArray1::from_slice(py, &r.plan_times_ms))?;
     d.set_item("ctrl_times_ms", PyArray1::from_slice(py, &r.ctrl_times_ms))?;
@@ -156,6 +157,7 @@ fn run_episode<'py>(
             },
         )?;
         plan.set_item("side", if p.side_sign > 0.0 { "left" } else { "right" })?;
+        plan.set_item("hold_back", p.hold_back)?;
         plan.set_item("push_from", pushed.first().map(|s| s.0))?;
         plan.set_item("push_to", pushed.last().map(|s| s.0 + dt))?;
         plan.set_item(

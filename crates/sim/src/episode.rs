@@ -221,6 +221,10 @@ pub struct PlanRecord {
     /// The target driver's command `[δ, T_b]` the plan held.
     #[serde(default)]
     pub target_input: [f64; 2],
+    /// The bullet was held back behind the target: its stand-off pose, or its way there,
+    /// would run into an obstacle (`planner::DecisionPackage::hold_back`).
+    #[serde(default)]
+    pub hold_back: bool,
 }
 
 impl PlanRecord {
@@ -259,6 +263,7 @@ impl PlanRecord {
             side_sign: p.side.sign(),
             contact_point: [p.contact_point.x, p.contact_point.y],
             target_input,
+            hold_back: p.hold_back,
         }
     }
 }
@@ -288,6 +293,11 @@ pub struct EpisodeResult {
     /// MPC steps that returned the safe fallback / ran out of their time budget.
     pub mpc_failures: u32,
     pub mpc_time_budget: u32,
+    /// The time (s) of the last plan that held the bullet back behind the target for an
+    /// obstacle in the way of its stand-off pose (`planner::DecisionPackage::hold_back`);
+    /// `None` if no plan did.
+    #[serde(default)]
+    pub held_back_until: Option<f64>,
     /// Wall-clock time of the whole episode (s): not deterministic.
     pub wall_time: f64,
     /// Every plan and control time (ms), for pooled statistics.
@@ -433,6 +443,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
     let mut plans = Vec::new();
     let mut stabilising_reported = false;
     let (mut mpc_failures, mut mpc_time_budget) = (0u32, 0u32);
+    let mut held_back_until = None;
     let mut phase = ctl.phase();
     let mut steps = 0u64;
     let mut status = Status::Running;
@@ -461,6 +472,9 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         steps += 1;
         if out.replanned {
             plan_times.push(out.plan_time * 1e3);
+            if ctl.package().is_some_and(|p| p.hold_back) {
+                held_back_until = Some(t);
+            }
             if config.record {
                 plans.extend(ctl.package().map(|p| PlanRecord::of(p, [t_steer, t_brake])));
             }
@@ -523,6 +537,7 @@ pub fn run_episode_with_rng<R: RngCore + ?Sized>(
         abort: ctl.abort_reason().map(|a| format!("{a:?}")),
         mpc_failures,
         mpc_time_budget,
+        held_back_until,
         wall_time: wall0.elapsed().as_secs_f64(),
         plan_times_ms: plan_times,
         ctrl_times_ms: ctrl_times,

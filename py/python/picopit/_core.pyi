@@ -643,6 +643,9 @@ class EpisodeResult(TypedDict):
     abort: Optional[str]
     mpc_failures: int
     mpc_time_budget: int
+    held_back_until: Optional[float]
+    """The time (s) of the last plan that held the bullet back behind the target for an
+    obstacle in the way of its stand-off pose; None if no plan did."""
     wall_time: float
     plan_times_ms: _F64
     """Every planning time (ms) of the episode (steps that planned)."""
@@ -650,7 +653,8 @@ class EpisodeResult(TypedDict):
     """Every control time (ms) of the episode (steps the MPC ran)."""
     #: with ``record``, the upper layer's plans: ``time``, ``mode``, ``reason`` (why an
     #: abort: ``"race lost"`` or the infeasibility; else None), ``side`` (``"left"`` or
-    #: ``"right"``), ``push_from``, ``push_to``, ``push_peak``, ``push_impulse`` (the planned
+    #: ``"right"``), ``hold_back`` (the bullet held back behind the target for an obstacle),
+    #: ``push_from``, ``push_to``, ``push_peak``, ``push_impulse`` (the planned
     #: ∫F_n dt, N s), ``predicted_heading_error``, ``predicted_time`` ((N+1,) step start
     #: times, s) and ``predicted_target`` ((N+1, 8) the predicted target states) (empty without)
     plans: List[Dict[str, Any]]

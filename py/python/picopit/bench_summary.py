@@ -342,7 +342,7 @@ EPISODE_FIELDS = ("config", "index", "scenario", "category", "road", "adhesion",
                   "reversed_speed", "failed_vehicle", "sim_time", "control_steps", "plan_count",
                   "plan_ms_median", "plan_ms_p99", "plan_ms_max", "ctrl_count", "ctrl_ms_median",
                   "ctrl_ms_p99", "ctrl_ms_max",
-                  "final_phase", "abort", "mpc_failures", "mpc_time_budget", "wall_time", "error")
+                  "final_phase", "abort", "mpc_failures", "mpc_time_budget", "held_back_until", "wall_time", "error")
 
 
 def episode_table(rows: Sequence[Mapping[str, Any]], meta: Mapping[int, Mapping[str, Any]]) -> List[Dict[str, Any]]:

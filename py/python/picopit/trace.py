@@ -126,11 +126,12 @@ class Trace:
                       else f"{p['push_from']:.2f}-{p['push_to']:.2f} s, peak {p['push_peak']:.0f} N, "
                            f"{p['push_impulse'] / 1000:.1f} kN s")
             why = f" ({p['reason']})" if p.get("reason") else ""
+            held = ", held back behind the target" if p.get("hold_back") else ""
             err = self.prediction_error(p)
             truth = ("" if err is None else
                      f"; at {err['time']:.2f} s the target was {err['distance']:.2f} m and "
                      f"{math.degrees(err['heading']):+.0f} deg off the prediction")
-            out.append(f"plan at {p['time']:5.2f} s: {p['mode']}{why}, {p.get('side', '?')} side, "
+            out.append(f"plan at {p['time']:5.2f} s: {p['mode']}{why}, {p.get('side', '?')} side{held}, "
                        f"push {window}, predicted heading error "
                        f"{p['predicted_heading_error']:.3f} rad{truth}")
         return out
