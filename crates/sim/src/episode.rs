@@ -105,7 +105,7 @@ pub struct Sample {
 
 impl Sample {
     /// Column names of [`Sample::row`].
-    pub const COLUMNS: [&'static str; 26] = [
+    pub const COLUMNS: [&'static str; 29] = [
         "time",
         "target_vx",
         "target_vy",
@@ -132,6 +132,9 @@ impl Sample {
         "plan_ms",
         "ctrl_ms",
         "decided",
+        "contact_gamma",
+        "contact_px",
+        "contact_py",
     ];
 
     /// The contact averaged over the step as the target model's input (none apart).
@@ -148,10 +151,11 @@ impl Sample {
     }
 
     /// The sample as numbers in [`Sample::COLUMNS`] order (phase as its index: chasing 0,
-    /// PIT 1, stabilising 2, done 3, aborted 4; `decided` is filled by the caller).
+    /// PIT 1, stabilising 2, done 3, aborted 4; `decided` is filled by the caller; the
+    /// contact's normal heading and point last, zeros apart).
     #[must_use]
-    pub fn row(&self, decided: bool) -> [f64; 26] {
-        let mut r = [0.0; 26];
+    pub fn row(&self, decided: bool) -> [f64; 29] {
+        let mut r = [0.0; 29];
         r[0] = self.time;
         r[1..9].copy_from_slice(&self.target);
         r[9..15].copy_from_slice(&self.bullet);
@@ -163,6 +167,8 @@ impl Sample {
         r[23] = self.plan_ms;
         r[24] = self.ctrl_ms;
         r[25] = f64::from(u8::from(decided));
+        r[26] = self.contact_gamma;
+        r[27..29].copy_from_slice(&self.contact_point);
         r
     }
 }

@@ -659,7 +659,9 @@ class EpisodeResult(TypedDict):
     #: times, s) and ``predicted_target`` ((N+1, 8) the predicted target states) (empty without)
     plans: List[Dict[str, Any]]
     trajectory: Optional[_F64]
-    """(steps, 26) per control step when recorded; columns: ``trajectory_columns()``."""
+    """(steps, 29) per control step when recorded; columns: ``trajectory_columns()`` (the
+    last three, ``contact_gamma``, ``contact_px``, ``contact_py``, with ``contact_fn`` and
+    ``contact_ft`` are the step's averaged contact as a target model takes it)."""
 
 def episode_presets() -> List[str]:
     """``['4dof', 'pinn', 'picopinn', 'picopinn_no_upper']``."""
