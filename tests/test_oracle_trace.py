@@ -287,3 +287,102 @@ def test_trace_names_a_non_finite_controller_setting(tmp_path, capsys):
     rc = cli.main(["trace", "--scenarios", str(TEXTBOOK), "sc-00000", "--controller-config", str(bad)])
     err = capsys.readouterr().err
     assert rc == 2 and "`planner.approach_accel_min` must be a finite number" in err, err
+
+
+def test_trace_steps_the_models_through_the_push_that_was_delivered(capsys):
+    """Textbook `sc-00002` (PicoPINN): the recorded contact of every step is the input a
+    target model takes (its point on the target's side, its normal the side's, pointing into
+    the target; zeros apart), and the learned models stepped through the recorded push from
+    the state before it follow the truth's turn, which the contact carries: without it the
+    same model misses by far."""
+    t = trace.trace(trace.find_scene(TEXTBOOK, "sc-00002"), "picopinn")
+    c = t.columns
+    push = t.first_push()
+    assert push is not None and len(push) >= 5
+    touch = c["contact_fn"] > 0
+    apart = ~touch
+    assert np.all(c["contact_gamma"][apart] == 0.0) and np.all(c["contact_px"][apart] == 0.0)
+    length, width = 4.508, 1.61
+    px, py = c["contact_px"][touch], c["contact_py"][touch]
+    assert np.all(np.abs(px) <= length) and np.allclose(np.abs(py), width / 2, atol=0.15)
+    # Normal from the bullet into the target: on the target's left side it points to its right.
+    side_normal = c["target_psi"][touch] - np.sign(py) * np.pi / 2
+    off = np.array([_core.wrap_angle(a) for a in c["contact_gamma"][touch] - side_normal])
+    assert np.all(np.abs(off) < 0.4), off
+    pm = t.push_models()
+    dt = c["time"][1] - c["time"][0]
+    assert pm["impulse"] == pytest.approx(c["contact_fn"][push.start:push.stop].sum() * dt)
+    assert pm["start"] == pytest.approx(c["time"][push.start - 1]) and pm["end"] == pytest.approx(c["time"][push.stop - 1])
+    end = pm["rows"][0]
+    assert end["time"] == pytest.approx(pm["end"]) and len(pm["rows"]) == 2
+    truth = end["truth"][0]
+    assert abs(truth) > np.radians(20), "the push turned the target"
+    for name in ("pinn", "picopinn"):
+        assert abs(end[name][0] - truth) < np.radians(15), (name, end[name], truth)
+    assert abs(end["free"][0] - truth) > np.radians(40), "without the contact the model misses the turn"
+    assert end["plan"] is not None, "the plan before the contact predicts the push's end"
+    rc = cli.main(["trace", "sc-00002", "--scenarios", str(TEXTBOOK), "--every", "400", "--push-models"])
+    lines = capsys.readouterr().out.splitlines()
+    assert rc == 0
+    i = next(i for i, l in enumerate(lines) if l.startswith("push "))
+    assert " kN s, contact point " in lines[i] and "truth" in lines[i + 1] and "picopinn" in lines[i + 1]
+    assert len(lines[i + 2].split()) == 1 + 6 * 3 and lines[i + 4].startswith("metrics:")
+
+
+def test_trace_says_when_there_was_no_push_to_step_the_models_through():
+    """`sc-01093` ends "decision infeasible" before any contact: no push to check."""
+    t = trace.trace(trace.find_scene(DATASET, "sc-01093"), "picopinn")
+    assert t.first_push() is None and t.push_models() is None
+    assert t.push_model_lines() == ["push models: no contact recorded (after the first step)"]
+
+
+def _episodes_csv(path: Path, ids, contact="2.5", config="picopinn") -> Path:
+    lines = ["config,scenario,params,contact_at,success"]
+    lines += [f"{config},{i},full_size,{contact},true" for i in ids]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_push_models_sets_the_models_and_the_plans_against_the_delivered_pushes(tmp_path, capsys):
+    """Three textbook episodes a run touched: each first push traced again; the learned
+    models, given the delivered push, predict its turn within a quarter of the truth's."""
+    run = _episodes_csv(tmp_path / "episodes.csv", ["sc-00000", "sc-00002", "sc-00004"])
+    out = tmp_path / "pm.json"
+    rc = cli.main(["push-models", str(run), "--scenarios", str(TEXTBOOK), "--n", "3", "--no-progress",
+                   "--json", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    doc = json.loads(out.read_text())
+    assert doc["scenes"] == 3 and len(doc["pushes"]) == 3 and doc["turned"] >= 2
+    for k in ("pinn", "picopinn"):
+        s = doc["sources"][k]
+        assert s["n"] == doc["turned"] and 0.75 < s["median"] < 1.25, (k, s)
+    assert {p["scene"] for p in doc["pushes"]} == {"sc-00000", "sc-00002", "sc-00004"}
+    assert all(p["impulse"] > 0 and -4.5 < p["point_x"] < 0 for p in doc["pushes"]), "rear-quarter pushes"
+    assert "picopinn" in text and "off by more than half" in text
+
+
+def test_push_models_draws_the_same_scenes_for_the_same_seed(tmp_path):
+    from picopit import push_models
+
+    run = _episodes_csv(tmp_path / "e.csv", [f"sc-{i:05d}" for i in range(0, 40, 2)])
+    a = push_models.sample_scenes(run, "picopinn", "full_size", 5, 3)
+    assert a == push_models.sample_scenes(run, "picopinn", "full_size", 5, 3) and len(a) == 5
+    assert a != push_models.sample_scenes(run, "picopinn", "full_size", 5, 4)
+    assert len(push_models.sample_scenes(run, "picopinn", "full_size", 500, 3)) == 20
+
+
+@pytest.mark.parametrize("make, argv, words", [
+    (lambda p: p.write_text("config,scenario,params,success\npicopinn,sc-00000,full_size,true\n"), [],
+     "`contact_at`"),
+    (lambda p: _episodes_csv(p, ["sc-99999"]), [], "sc-99999"),
+    (lambda p: _episodes_csv(p, ["sc-00000"], contact=""), [], "touched the target"),
+    (lambda p: _episodes_csv(p, ["sc-00000"]), ["--n", "0"], "--n 0"),
+    (lambda p: _episodes_csv(p, ["sc-00000"]), ["--workers", "0"], "--workers 0"),
+])
+def test_push_models_refuses_bad_input_naming_it(tmp_path, capsys, make, argv, words):
+    run = tmp_path / "episodes.csv"
+    make(run)
+    rc = cli.main(["push-models", str(run), "--scenarios", str(TEXTBOOK), "--no-progress", *argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and words in err and "Traceback" not in err, err

@@ -520,7 +520,7 @@ def _main(args: argparse.Namespace) -> int:
         from .headroom import HeadroomError
 
         bad_input += (CompareError, HeadroomError)
-    if args.command in ("oracle", "trace", "seed-scatter"):
+    if args.command in ("oracle", "trace", "push-models", "seed-scatter"):
         from .oracle import OracleError
         from .seed_scatter import SeedScatterError
         from .trace import TraceError

@@ -1,5 +1,6 @@
 """The analysis subcommands of the ``picopit`` command line: ``oracle`` (the ideal-PIT bound
-and its tiers), ``trace`` (one episode step by step), ``compare`` (two benchmark runs scene
+and its tiers), ``trace`` (one episode step by step), ``push-models`` (the models and the
+plans against the pushes a run delivered), ``compare`` (two benchmark runs scene
 by scene), ``headroom`` (a run against the bound) and ``seed-scatter`` (the surrogates' accuracy over training seeds). Same
 conventions as ``cli``: bad input is one line and exit status 2 (``OracleError``,
 ``TraceError``, ``CompareError``, ``HeadroomError`` and the core's errors are bad input there), work that could
@@ -19,6 +20,7 @@ DEFAULT_SCENARIOS = "data/scenarios.jsonl"
 def add_parsers(sub) -> None:
     _oracle_parser(sub)
     _trace_parser(sub)
+    _push_models_parser(sub)
     _compare_parser(sub)
     _headroom_parser(sub)
     _seed_scatter_parser(sub)
@@ -205,6 +207,11 @@ def _trace_parser(sub) -> None:
                    help="also list the upper layer's plans (mode and, for an abort, why; side; planned push: window, "
                         "peak force, impulse; predicted heading error; how far the target then was from the "
                         "prediction, in metres and degrees, at the prediction's last recorded step)")
+    p.add_argument("--push-models", action="store_true",
+                   help="also step the target models (4-DOF, PINN, PicoPINN of --models) through the first push "
+                        "as it happened (the recorded contact and driver commands, from the state before the "
+                        "contact to 2 s past the push) beside the truth and the plan made before the contact: "
+                        "whether a prediction's error is the model's or the planned push's")
     p.add_argument("--csv", metavar="PATH", help="write every step, with the road-frame columns, as CSV")
     p.add_argument("--plot", metavar="PNG", help="draw the episode (paths, yaw, speed, command, contact)")
     p.set_defaults(func=_cmd_trace)
@@ -227,6 +234,8 @@ def _cmd_trace(args: argparse.Namespace) -> int:
     print(t.table(args.every))
     if args.plans:
         print("\n".join(t.plan_lines()))
+    if args.push_models:
+        print("\n".join(t.push_model_lines(Path(args.models))))
     print(t.metrics())
     if args.csv:
         print(f"trace: wrote {t.write_csv(Path(args.csv))}")
@@ -235,6 +244,51 @@ def _cmd_trace(args: argparse.Namespace) -> int:
 
         plot_case({"trajectory": t.trajectory}, scene, Path(args.plot), f"{scene['id']}: {args.config}")
         print(f"trace: wrote {args.plot}")
+    return 0
+
+
+def _push_models_parser(sub) -> None:
+    p = sub.add_parser(
+        "push-models",
+        help="the target models and the plans against the pushes a bench run delivered",
+        description=(
+            "Trace a seeded random sample of a picopit bench run's episodes that touched the target "
+            "(simulated clock) and step the target models (4-DOF, PINN, PicoPINN) through each first "
+            "push as it happened, as picopit trace --push-models does. For the pushes that turned the "
+            "target more than 10 deg, print the turn each model (given the delivered push) and the plan "
+            "made before the contact (given its own push) predict at the push's end, as a multiple of "
+            "the truth's: median and 10 and 90 % quantiles."
+        ),
+    )
+    p.add_argument("run", metavar="RUN", help="a picopit bench run folder (its episodes.parquet or .csv) or file")
+    p.add_argument("--scenarios", default=DEFAULT_SCENARIOS, metavar="JSONL",
+                   help=f"the run's scenario file (default {DEFAULT_SCENARIOS})")
+    p.add_argument("--config", default="picopinn", metavar="NAME",
+                   help="the run's configuration to trace (a preset; default picopinn)")
+    p.add_argument("--params", default="full_size", choices=("full_size", "half_scale"),
+                   help="the parameter set of the scenes drawn (default full_size)")
+    p.add_argument("--n", type=int, default=300, help="episodes drawn (default 300)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the draw (default 1)")
+    p.add_argument("--models", default="models", metavar="DIR", help="model folder (default models)")
+    p.add_argument("--workers", type=int, default=2, help="episodes at a time (threads; default 2)")
+    p.add_argument("--json", metavar="PATH", help="also write the summary and every push as JSON here")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_push_models)
+
+
+def _cmd_push_models(args: argparse.Namespace) -> int:
+    import json
+
+    from . import push_models as pmod
+
+    if args.json:
+        check_file(args.json, "--json")
+    result = pmod.survey(Path(args.run), Path(args.scenarios), args.config, args.params, n=args.n, seed=args.seed,
+                         models=Path(args.models), workers=args.workers, progress=not args.no_progress)
+    print("\n".join(pmod.lines(result)))
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1))
+        print(f"push-models: wrote {args.json}")
     return 0
 
 

@@ -136,6 +136,121 @@ class Trace:
                        f"{p['predicted_heading_error']:.3f} rad{truth}")
         return out
 
+    def first_push(self, gap: float = 0.5) -> Optional[range]:
+        """The control steps of the first push: from the first step in contact to the last
+        one before the vehicles stay apart for more than ``gap`` seconds; None without a
+        contact."""
+        steps = self.contact_steps
+        if steps.size == 0:
+            return None
+        t = self.columns["time"]
+        last = int(steps[0])
+        for k in steps[1:]:
+            if t[k] - t[last] > gap + 1e-9:
+                break
+            last = int(k)
+        return range(int(steps[0]), last + 1)
+
+    def push_models(self, models: Path = Path("models"), after: float = 2.0) -> Optional[Dict[str, Any]]:
+        """The target models stepped through the first push as it happened: from the recorded
+        state before the first contact, with the recorded driver commands and the recorded
+        contact of every step (its impulse average, point and normal: what a model takes),
+        to ``after`` seconds past the push's last contact. Beside them, the plan made last
+        before the contact (its prediction at the same times, if its look-ahead reaches
+        them). So a prediction error can be told apart: the models' own, given the push
+        that was delivered, or the planned push's, which the bullet did not deliver.
+
+        Returns ``None`` without a contact; else a dict: ``start``, ``end`` (the push's first
+        step start and last step end, s), ``impulse`` (∫F_n dt, N s), ``point_x`` (the
+        contact point's body x, impulse-weighted, m), ``plan`` (the plan's time, or None),
+        ``rows``: per checkpoint (the push's end, then ``after`` past it or the recording's
+        end), ``time`` and per source (``truth``, ``4dof``, ``pinn``, ``picopinn``, ``plan``,
+        ``free``: the PicoPINN without the contact) the heading turned since the start (rad,
+        unwrapped) and the yaw rate (rad/s), None where a source has no value."""
+        push = self.first_push()
+        if push is None:
+            return None
+        c = self.columns
+        k0, k1 = push.start, push.stop - 1
+        if k0 == 0:
+            return None  # no recorded state before the first contact
+        t = c["time"]
+        dt = float(t[1] - t[0]) if t.size > 1 else 0.05
+        k_end = min(len(t) - 1, k1 + int(round(after / dt)))
+        state_cols = ("target_vx", "target_vy", "target_psi", "target_r", "target_p", "target_phi",
+                      "target_x", "target_y")
+        x_of = lambda k: np.array([c[n][k] for n in state_cols])  # noqa: E731
+        mu, params = float(self.scene["mu"]), str(self.scene.get("params", "full_size"))
+        sources: Dict[str, Any] = {"4dof": _core.FourDofTarget(params, mu=mu)}
+        for name in ("pinn", "picopinn"):
+            path = Path(models) / params / f"{name}.safetensors"
+            if path.is_file():
+                m = _core.SurrogateModel(str(path))
+                lo, hi = m.mu_range
+                m.mu = min(max(mu, lo), hi)
+                sources[name] = m
+        checkpoints = sorted({k1, k_end})
+        psi0 = float(c["target_psi"][k0 - 1])
+        # Per source and checkpoint: (heading turned since the start, unwrapped step by step; r).
+        got: Dict[str, Dict[int, tuple]] = {n: {} for n in list(sources) + ["free"]}
+        for name, model in list(sources.items()) + [("free", sources.get("picopinn", sources["4dof"]))]:
+            x, turned = x_of(k0 - 1), 0.0
+            for k in range(k0, k_end + 1):
+                u = [c["target_steer"][k], c["target_brake"][k]]
+                if name != "free" and c["contact_fn"][k] > 0:
+                    nx = model.step(x, u, [c["contact_fn"][k], c["contact_ft"][k]], float(c["contact_gamma"][k]),
+                                    [c["contact_px"][k], c["contact_py"][k]])
+                else:
+                    nx = model.step(x, u)
+                turned += _core.wrap_angle(float(nx[2] - x[2]))
+                x = nx
+                if k in checkpoints:
+                    got[name][k] = (turned, float(x[3]))
+        plan = None
+        for p in self.result.get("plans") or []:
+            if p["time"] <= t[k0 - 1] + 1e-9 and p["push_from"] is not None:
+                plan = p
+        truth_turn = np.concatenate([[0.0], np.cumsum([_core.wrap_angle(float(a))
+                                                       for a in np.diff(c["target_psi"][k0 - 1:k_end + 1])])])
+        rows = []
+        for k in checkpoints:
+            row: Dict[str, Any] = {"time": float(t[k]), "truth": (float(truth_turn[k - k0 + 1]), float(c["target_r"][k]))}
+            row.update({name: g[k] for name, g in got.items()})
+            row["plan"] = None
+            if plan is not None:
+                times, states = np.asarray(plan["predicted_time"]), np.asarray(plan["predicted_target"])
+                j = int(np.argmin(np.abs(times - t[k])))
+                if abs(times[j] - t[k]) < 1e-6:
+                    # The plan's turn from its own start, plus where its start stood against psi0.
+                    own = sum(_core.wrap_angle(float(a)) for a in np.diff(states[: j + 1, 2]))
+                    row["plan"] = (own + _core.wrap_angle(float(states[0, 2]) - psi0), float(states[j, 3]))
+            rows.append(row)
+        fn = c["contact_fn"][k0:k1 + 1]
+        impulse = float(fn.sum() * dt)
+        point_x = float((fn * c["contact_px"][k0:k1 + 1]).sum() / max(fn.sum(), 1e-12))
+        return {"start": float(t[k0 - 1]), "end": float(t[k1]), "impulse": impulse, "point_x": point_x,
+                "plan": None if plan is None else float(plan["time"]), "rows": rows}
+
+    def push_model_lines(self, models: Path = Path("models")) -> List[str]:
+        """:meth:`push_models` as text: the push, then one line per checkpoint and source
+        with the heading turned since the push began (deg) and the yaw rate (deg/s)."""
+        pm = self.push_models(models)
+        if pm is None:
+            return ["push models: no contact recorded (after the first step)"]
+        plan = "no plan with a push before the contact" if pm["plan"] is None else f"plan at {pm['plan']:.2f} s"
+        out = [f"push {pm['start']:.2f}-{pm['end']:.2f} s: {pm['impulse'] / 1000:.2f} kN s, contact point "
+               f"{pm['point_x']:+.2f} m from the c.g. along the target; the models given the recorded push "
+               f"and driver commands, the PicoPINN without the contact (free), the {plan}:"]
+        names = ("truth", "4dof", "pinn", "picopinn", "free", "plan")
+        out.append(f"{'at':>8} " + " ".join(f"{n:>16}" for n in names) + "   (turned deg / yaw rate deg/s)")
+        for row in pm["rows"]:
+            cells = []
+            for n in names:
+                v = row.get(n)
+                cells.append(f"{'-':>16}" if v is None else f"{math.degrees(v[0]):7.1f} /{math.degrees(v[1]):7.1f}")
+            out.append(f"{row['time']:7.2f}s " + " ".join(cells))
+        return out
+
     def metrics(self) -> str:
         parts = []
         for k in METRICS:
