@@ -359,6 +359,9 @@ def test_push_models_sets_the_models_and_the_plans_against_the_delivered_pushes(
         assert s["n"] == doc["turned"] and 0.75 < s["median"] < 1.25, (k, s)
     assert {p["scene"] for p in doc["pushes"]} == {"sc-00000", "sc-00002", "sc-00004"}
     assert all(p["impulse"] > 0 and -4.5 < p["point_x"] < 0 for p in doc["pushes"]), "rear-quarter pushes"
+    assert all(0 < p["impact"] <= p["impulse"] and p["peak"] * 0.05 >= p["impact"] / 3 for p in doc["pushes"])
+    d = doc["delivered"]
+    assert d["impact"]["p10"] <= d["impact"]["median"] <= d["impact"]["p90"]
     assert "picopinn" in text and "off by more than half" in text
 
 

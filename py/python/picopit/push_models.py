@@ -9,7 +9,8 @@ driver commands, from the state before the contact), and the plan made before th
 For the pushes that turned the target more than ``min_turn``, the turn each predicts at the
 push's end is divided by the truth's; the report gives the median and the 10 and 90 %
 quantiles of that ratio per source, and how often the plan was off by more than half the
-turn either way. A model near 1 with the plan far from it says the plans' errors are the
+turn either way; and what the bullet delivered (the impact in the push's first 0.15 s, the
+median force after it, the peak, the contact point along the target). A model near 1 with the plan far from it says the plans' errors are the
 planned push's, not the model's (``docs/planner.md``, Limits).
 """
 
@@ -61,7 +62,9 @@ def survey(run: Path, scenarios: Path, config: str = "picopinn", params: str = "
     Returns ``scenes`` (traced), ``turned`` (pushes that turned the target more than
     ``min_turn``), ``sources``: per source ``n`` (ratios), ``median``, ``p10``, ``p90`` of
     the predicted turn over the truth's at the push's end, and for the plan ``over`` and
-    ``under`` (ratio above 1.5, below 0.5); ``pushes``: one dict per traced push."""
+    ``under`` (ratio above 1.5, below 0.5); ``delivered``: median, 10 and 90 % over the
+    pushes of ``impact``, ``sustained``, ``peak`` (N s, N) and ``point_x`` (m);
+    ``pushes``: one dict per traced push."""
     if n < 1:
         raise TraceError(f"--n {n}: need at least 1")
     if workers < 1:
@@ -81,6 +84,7 @@ def survey(run: Path, scenarios: Path, config: str = "picopinn", params: str = "
             return None
         end = pm["rows"][0]
         return {"scene": sid, "truth": end["truth"][0], "impulse": pm["impulse"], "point_x": pm["point_x"],
+                "impact": pm["impact"], "sustained": pm["sustained"], "peak": pm["peak"],
                 **{k: (None if end.get(k) is None else end[k][0]) for k in SOURCES}}
 
     bar = _progress(len(ids), progress)
@@ -104,8 +108,14 @@ def survey(run: Path, scenarios: Path, config: str = "picopinn", params: str = "
         if k == "plan":
             s.update(over=int((r > 1.5).sum()), under=int((r < 0.5).sum()))
         sources[k] = s
+    delivered: Dict[str, Any] = {}
+    for k in ("impact", "sustained", "peak", "point_x"):
+        v = np.array([p[k] for p in pushes if p[k] is not None])
+        delivered[k] = None if v.size == 0 else {"median": float(np.median(v)), "p10": float(np.percentile(v, 10)),
+                                                 "p90": float(np.percentile(v, 90))}
     return {"run": str(run), "config": config, "params": params, "n": n, "seed": seed,
-            "scenes": len(ids), "pushes": pushes, "turned": len(turned), "sources": sources}
+            "scenes": len(ids), "pushes": pushes, "turned": len(turned), "sources": sources,
+            "delivered": delivered}
 
 
 def lines(result: Dict[str, Any]) -> List[str]:
@@ -122,6 +132,17 @@ def lines(result: Dict[str, Any]) -> List[str]:
             continue
         extra = f"   off by more than half: {s['over']} over, {s['under']} under" if k == "plan" else ""
         out.append(f"{k:>9} {s['n']:6d} {s['median']:7.2f} {s['p10']:6.2f} {s['p90']:6.2f}{extra}")
+    d = result["delivered"]
+
+    def q(k: str, scale: float, unit: str) -> str:
+        v = d.get(k)
+        if v is None:
+            return "-"
+        return f"{v['median'] / scale:.2f} {unit} (10-90 %: {v['p10'] / scale:.2f}-{v['p90'] / scale:.2f})"
+
+    out.append(f"delivered (median over the pushes): impact in the first 0.15 s {q('impact', 1e3, 'kN s')}, "
+               f"then {q('sustained', 1e3, 'kN')}, peak {q('peak', 1e3, 'kN')}, contact point "
+               f"{q('point_x', 1.0, 'm')} from the c.g.")
     return out
 
 

@@ -23,6 +23,8 @@ import numpy as np
 from . import _core
 
 PHASES = ("chasing", "pit", "stabilising", "done", "aborted")
+#: The opening of a push counted as its impact (s).
+IMPACT_TIME = 0.15
 #: The table's columns: name, width, format.
 COLUMNS = (("t", 6, "{:6.2f}"), ("phase", 11, "{:>11}"), ("contact", 7, "{:>7}"), ("ds", 7, "{:7.2f}"),
            ("T.d", 6, "{:6.2f}"), ("T.psi", 7, "{:7.1f}"), ("T.v", 6, "{:6.2f}"), ("B.d", 6, "{:6.2f}"),
@@ -163,6 +165,8 @@ class Trace:
         Returns ``None`` without a contact; else a dict: ``start``, ``end`` (the push's first
         step start and last step end, s), ``impulse`` (∫F_n dt, N s), ``point_x`` (the
         contact point's body x, impulse-weighted, m), ``plan`` (the plan's time, or None),
+        ``impact`` (∫F_n dt over the push's first 0.15 s, N s), ``peak`` (largest step force, N),
+        ``sustained`` (the median step force after that, N; None for a shorter push),
         ``rows``: per checkpoint (the push's end, then ``after`` past it or the recording's
         end), ``time`` and per source (``truth``, ``4dof``, ``pinn``, ``picopinn``, ``plan``,
         ``free``: the PicoPINN without the contact) the heading turned since the start (rad,
@@ -228,7 +232,10 @@ class Trace:
         fn = c["contact_fn"][k0:k1 + 1]
         impulse = float(fn.sum() * dt)
         point_x = float((fn * c["contact_px"][k0:k1 + 1]).sum() / max(fn.sum(), 1e-12))
+        head = max(1, int(round(IMPACT_TIME / dt)))
         return {"start": float(t[k0 - 1]), "end": float(t[k1]), "impulse": impulse, "point_x": point_x,
+                "impact": float(fn[:head].sum() * dt), "peak": float(fn.max()),
+                "sustained": float(np.median(fn[head:])) if fn.size > head else None,
                 "plan": None if plan is None else float(plan["time"]), "rows": rows}
 
     def push_model_lines(self, models: Path = Path("models")) -> List[str]:
