@@ -389,3 +389,14 @@ def test_push_models_refuses_bad_input_naming_it(tmp_path, capsys, make, argv, w
     rc = cli.main(["push-models", str(run), "--scenarios", str(TEXTBOOK), "--no-progress", *argv])
     err = capsys.readouterr().err
     assert rc == 2 and words in err and "Traceback" not in err, err
+
+
+def test_push_models_refuses_a_road_the_learned_models_were_not_trained_on():
+    """A scene at mu 1.1 (above the surrogates' training range) traced with the 4-DOF model:
+    stepping the PINN through its push is refused naming mu, not run at another mu."""
+    scene = trace.find_scene(TEXTBOOK, "sc-00002")
+    scene.update(mu=1.1, adhesion="high")
+    t = trace.trace(scene, "4dof")
+    assert t.first_push() is not None
+    with pytest.raises(trace.TraceError, match="mu"):
+        t.push_models()

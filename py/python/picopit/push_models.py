@@ -87,7 +87,10 @@ def survey(run: Path, scenarios: Path, config: str = "picopinn", params: str = "
                 "impact": pm["impact"], "sustained": pm["sustained"], "peak": pm["peak"],
                 **{k: (None if end.get(k) is None else end[k][0]) for k in SOURCES}}
 
-    bar = _progress(len(ids), progress)
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(ids), desc="push-models", unit="episode", leave=False, dynamic_ncols=True,
+               disable=None) if progress else None
     pushes: List[Dict[str, Any]] = []
     # The core releases the GIL while an episode runs: threads run episodes side by side.
     with ThreadPoolExecutor(max_workers=workers) as pool:
@@ -102,17 +105,12 @@ def survey(run: Path, scenarios: Path, config: str = "picopinn", params: str = "
     sources: Dict[str, Dict[str, Any]] = {}
     for k in SOURCES:
         r = np.array([p[k] / p["truth"] for p in turned if p[k] is not None])
-        s: Dict[str, Any] = {"n": int(r.size)}
-        if r.size:
-            s.update(median=float(np.median(r)), p10=float(np.percentile(r, 10)), p90=float(np.percentile(r, 90)))
+        s: Dict[str, Any] = {"n": int(r.size), **(_quantiles(r) or {})}
         if k == "plan":
             s.update(over=int((r > 1.5).sum()), under=int((r < 0.5).sum()))
         sources[k] = s
-    delivered: Dict[str, Any] = {}
-    for k in ("impact", "sustained", "peak", "point_x"):
-        v = np.array([p[k] for p in pushes if p[k] is not None])
-        delivered[k] = None if v.size == 0 else {"median": float(np.median(v)), "p10": float(np.percentile(v, 10)),
-                                                 "p90": float(np.percentile(v, 90))}
+    delivered = {k: _quantiles(np.array([p[k] for p in pushes if p[k] is not None]))
+                 for k in ("impact", "sustained", "peak", "point_x")}
     return {"run": str(run), "config": config, "params": params, "n": n, "seed": seed,
             "scenes": len(ids), "pushes": pushes, "turned": len(turned), "sources": sources,
             "delivered": delivered}
@@ -146,11 +144,9 @@ def lines(result: Dict[str, Any]) -> List[str]:
     return out
 
 
-def _progress(total: int, enabled: bool):
-    if not enabled:
+
+def _quantiles(v: np.ndarray) -> Optional[Dict[str, float]]:
+    """Median, 10 and 90 % of ``v``; None when empty."""
+    if v.size == 0:
         return None
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover - tqdm is a dependency
-        return None
-    return tqdm(total=total, desc="push-models", unit="episode", leave=False, dynamic_ncols=True, disable=None)
+    return {"median": float(np.median(v)), "p10": float(np.percentile(v, 10)), "p90": float(np.percentile(v, 90))}

@@ -23,6 +23,9 @@ import numpy as np
 from . import _core
 
 PHASES = ("chasing", "pit", "stabilising", "done", "aborted")
+#: The target state's columns in the recorded trajectory, in the models' order.
+TARGET_STATE = ("target_vx", "target_vy", "target_psi", "target_r", "target_p", "target_phi", "target_x",
+                "target_y")
 #: The opening of a push counted as its impact (s).
 IMPACT_TIME = 0.15
 #: The table's columns: name, width, format.
@@ -169,7 +172,8 @@ class Trace:
         ``sustained`` (the median step force after that, N; None for a shorter push),
         ``rows``: per checkpoint (the push's end, then ``after`` past it or the recording's
         end), ``time`` and per source (``truth``, ``4dof``, ``pinn``, ``picopinn``, ``plan``,
-        ``free``: the PicoPINN without the contact) the heading turned since the start (rad,
+        ``free``: the PicoPINN, or the 4-DOF model without a PicoPINN file, without the
+        contact) the heading turned since the start (rad,
         unwrapped) and the yaw rate (rad/s), None where a source has no value."""
         push = self.first_push()
         if push is None:
@@ -181,24 +185,21 @@ class Trace:
         t = c["time"]
         dt = float(t[1] - t[0]) if t.size > 1 else 0.05
         k_end = min(len(t) - 1, k1 + int(round(after / dt)))
-        state_cols = ("target_vx", "target_vy", "target_psi", "target_r", "target_p", "target_phi",
-                      "target_x", "target_y")
-        x_of = lambda k: np.array([c[n][k] for n in state_cols])  # noqa: E731
         mu, params = float(self.scene["mu"]), str(self.scene.get("params", "full_size"))
         sources: Dict[str, Any] = {"4dof": _core.FourDofTarget(params, mu=mu)}
         for name in ("pinn", "picopinn"):
             path = Path(models) / params / f"{name}.safetensors"
             if path.is_file():
-                m = _core.SurrogateModel(str(path))
-                lo, hi = m.mu_range
-                m.mu = min(max(mu, lo), hi)
-                sources[name] = m
+                try:
+                    sources[name] = _core.SurrogateModel(str(path), mu=mu)
+                except _core.ModelError as e:  # e.g. the scene's mu outside the model's range
+                    raise TraceError(f"{path}: {e}") from None
         checkpoints = sorted({k1, k_end})
         psi0 = float(c["target_psi"][k0 - 1])
         # Per source and checkpoint: (heading turned since the start, unwrapped step by step; r).
         got: Dict[str, Dict[int, tuple]] = {n: {} for n in list(sources) + ["free"]}
         for name, model in list(sources.items()) + [("free", sources.get("picopinn", sources["4dof"]))]:
-            x, turned = x_of(k0 - 1), 0.0
+            x, turned = np.array([c[n][k0 - 1] for n in TARGET_STATE]), 0.0
             for k in range(k0, k_end + 1):
                 u = [c["target_steer"][k], c["target_brake"][k]]
                 if name != "free" and c["contact_fn"][k] > 0:
@@ -214,8 +215,7 @@ class Trace:
         for p in self.result.get("plans") or []:
             if p["time"] <= t[k0 - 1] + 1e-9 and p["push_from"] is not None:
                 plan = p
-        truth_turn = np.concatenate([[0.0], np.cumsum([_core.wrap_angle(float(a))
-                                                       for a in np.diff(c["target_psi"][k0 - 1:k_end + 1])])])
+        truth_turn = np.unwrap(c["target_psi"][k0 - 1:k_end + 1]) - psi0
         rows = []
         for k in checkpoints:
             row: Dict[str, Any] = {"time": float(t[k]), "truth": (float(truth_turn[k - k0 + 1]), float(c["target_r"][k]))}
@@ -226,7 +226,7 @@ class Trace:
                 j = int(np.argmin(np.abs(times - t[k])))
                 if abs(times[j] - t[k]) < 1e-6:
                     # The plan's turn from its own start, plus where its start stood against psi0.
-                    own = sum(_core.wrap_angle(float(a)) for a in np.diff(states[: j + 1, 2]))
+                    own = float(np.unwrap(states[: j + 1, 2])[-1] - states[0, 2])
                     row["plan"] = (own + _core.wrap_angle(float(states[0, 2]) - psi0), float(states[j, 3]))
             rows.append(row)
         fn = c["contact_fn"][k0:k1 + 1]
