@@ -29,6 +29,35 @@ pub struct ControllerInput<'a> {
     pub obstacles: &'a [Obstacle],
 }
 
+/// Whether the target is on an open road ([`crate::PhaseSettings::open_road_half_width`]
+/// and the fields after it): the road at least that wide, straight and clear of obstacles
+/// `open_road_clear` before and after the target, and the target no faster than
+/// `open_road_speed`.
+#[must_use]
+pub fn open_road(s: &crate::PhaseSettings, input: &ControllerInput<'_>) -> bool {
+    /// Sampling step along the road (m) and the largest curvature (1/m) of a straight.
+    const STEP: f64 = 10.0;
+    const STRAIGHT: f64 = 1e-4;
+    let xt = &input.target;
+    let at = Vec2::new(xt[idx::X], xt[idx::Y]);
+    if input.road.half_width() < s.open_road_half_width
+        || xt[idx::VX].hypot(xt[idx::VY]) > s.open_road_speed
+    {
+        return false;
+    }
+    let s0 = input.road.project(at).s;
+    let samples = (s.open_road_clear / STEP).ceil() as i64;
+    let straight = (-samples..=samples).all(|k| {
+        let pose = input.road.pose_at(s0 + k as f64 * STEP);
+        pose.curvature.abs() < STRAIGHT
+    });
+    straight
+        && input
+            .obstacles
+            .iter()
+            .all(|o| (o.position_at(input.time) - at).norm() > s.open_road_clear)
+}
+
 impl<'a> ControllerInput<'a> {
     /// The upper layer's view of this step: on `side` if committed, with the planner's best
     /// effort (in contact) or not.
@@ -102,6 +131,8 @@ pub struct PitController {
     started: bool,
     /// The target's heading when the PIT phase began (the frame of the push).
     pit_frame: Option<f64>,
+    /// Whether the push under way began on an open road (the release it waits for).
+    open_road: bool,
     /// Consecutive infeasible decisions while chasing.
     infeasible_count: u32,
     clock: Box<dyn Clock + Send + Sync>,
@@ -147,6 +178,7 @@ impl PitController {
             next_replan: f64::NEG_INFINITY,
             started: false,
             pit_frame: None,
+            open_road: false,
             infeasible_count: 0,
             clock: Box::new(MonotonicClock::new()),
             settings,
@@ -299,7 +331,10 @@ impl PitController {
             // A push begins in the target's frame of the moment; a push tried again (back
             // to chasing) begins in a new one.
             match self.phases.phase() {
-                Phase::Pit => self.pit_frame = Some(input.target[idx::PSI]),
+                Phase::Pit => {
+                    self.pit_frame = Some(input.target[idx::PSI]);
+                    self.open_road = open_road(&self.settings.phases, input);
+                }
                 Phase::Chasing => self.pit_frame = None,
                 _ => {}
             }
@@ -388,7 +423,7 @@ impl PitController {
             let pin = input.planner_input(Some(self.planner.package().side), true);
             if self
                 .planner
-                .push_done(&pin, &self.settings.phases.release())?
+                .push_done(&pin, &self.settings.phases.release(self.open_road))?
             {
                 self.phases.stabilise(input.time);
             }

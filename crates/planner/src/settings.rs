@@ -416,6 +416,24 @@ pub struct PhaseSettings {
     /// heading within this of the reversed heading (rad; the planner's `heading_tol` bounds
     /// it as well).
     pub release_heading_tol: f64,
+    /// The same on an open road (rad): a push begun on a straight, wide road with no
+    /// obstacle near and the target no faster than the PIT is done at
+    /// ([`Self::open_road_speed`]) is held until the target is predicted this near
+    /// reversed. There the longer push's extra turn costs nothing (room on both sides), and a
+    /// lane-keeping target, which steers back towards its lane while it rolls backwards after
+    /// the spin and takes 10–25° of the turn back, then stops inside ε_ψ (docs/planner.md,
+    /// "Release on an open road").
+    pub open_road_release_heading_tol: f64,
+    /// An open road: at least this far (m) from the road's reference line to either edge
+    /// (three 3.5 m lanes and 2 m shoulders give 7.25 m) ...
+    pub open_road_half_width: f64,
+    /// ... straight (curvature below 1e-4 1/m) and clear of obstacles this far (m) before
+    /// and after the target ...
+    pub open_road_clear: f64,
+    /// ... and the target no faster (m/s) than this when the push begins: agencies restrict
+    /// the PIT to about 45 mph (20.1 m/s; docs/planner.md); faster targets pushed longer
+    /// over-rotate.
+    pub open_road_speed: f64,
     /// ... and if the target left alone would end the look-ahead slower than
     /// `release_rest_speed` (m/s; 0: never), with it within `release_rest_heading_tol`
     /// (rad) instead: it has no spin left to come ([`crate::Release`]).
@@ -467,6 +485,10 @@ impl Default for PhaseSettings {
             pit_yaw_done: 1.05,
             let_go_turn: 0.35,
             release_heading_tol: 0.6,
+            open_road_release_heading_tol: 0.2,
+            open_road_half_width: 7.0,
+            open_road_clear: 150.0,
+            open_road_speed: 20.5,
             release_rest_speed: 6.0,
             release_rest_heading_tol: 0.3,
             settle_speed: 0.5,
@@ -486,11 +508,16 @@ impl Default for PhaseSettings {
 }
 
 impl PhaseSettings {
-    /// The closed loop's release test ([`crate::Planner::push_done`]).
+    /// The closed loop's release test ([`crate::Planner::push_done`]), for a push begun on
+    /// an open road or not.
     #[must_use]
-    pub fn release(&self) -> crate::Release {
+    pub fn release(&self, open_road: bool) -> crate::Release {
         crate::Release {
-            heading_tol: self.release_heading_tol,
+            heading_tol: if open_road {
+                self.open_road_release_heading_tol
+            } else {
+                self.release_heading_tol
+            },
             rest_speed: self.release_rest_speed,
             rest_heading_tol: self.release_rest_heading_tol,
         }
@@ -526,6 +553,13 @@ impl PhaseSettings {
             ("phases.bullet_clearance_min", self.bullet_clearance_min),
             ("phases.let_go_turn", self.let_go_turn),
             ("phases.release_heading_tol", self.release_heading_tol),
+            (
+                "phases.open_road_release_heading_tol",
+                self.open_road_release_heading_tol,
+            ),
+            ("phases.open_road_half_width", self.open_road_half_width),
+            ("phases.open_road_clear", self.open_road_clear),
+            ("phases.open_road_speed", self.open_road_speed),
             ("phases.release_rest_speed", self.release_rest_speed),
             (
                 "phases.release_rest_heading_tol",

@@ -605,7 +605,7 @@ fn a_target_coming_to_rest_is_released_only_nearly_reversed() {
         inp.side = Some(mpc::Side::Right);
         inp
     };
-    let release = PhaseSettings::default().release();
+    let release = PhaseSettings::default().release(false);
     assert!((release.rest_heading_tol - 0.3).abs() < 1e-12 && release.rest_speed > 2.0);
     let heading_only = Release::heading(release.heading_tol);
     let mut p = planner(PlannerSettings::default());
@@ -622,6 +622,62 @@ fn a_target_coming_to_rest_is_released_only_nearly_reversed() {
         );
     }
     assert!(p.push_done(&short(0.12, 15.0), &release).unwrap());
+}
+
+/// The push waits for the open-road release (0.2 rad, not 0.6) only on a straight road at
+/// least `open_road_half_width` from its centre to either edge, with no obstacle within
+/// `open_road_clear` of the target, and a target no faster than `open_road_speed`: a curve
+/// ahead, a narrower road, a stopped car ahead or a fast target each keep the default.
+#[test]
+fn the_open_road_release_needs_a_straight_wide_clear_road_and_a_pit_speed() {
+    use dynamics::target::idx;
+    use planner::controller::{open_road, ControllerInput};
+    let s = PhaseSettings::default();
+    assert!((s.release(true).heading_tol - 0.2).abs() < 1e-12);
+    assert!((s.release(false).heading_tol - 0.6).abs() < 1e-12);
+    let wide = Road::straight(1000.0, 3, 3.6, 2.2); // 7.6 m to either edge
+    let narrow = Road::straight(1000.0, 3, 3.6, 1.0); // 6.4 m
+    let bend = Road::curved(400.0, 300.0, 200.0, 0.0, 3, 3.6, 2.2);
+    let car = |x: f64| Obstacle {
+        x,
+        y: 0.0,
+        heading: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        length: 4.5,
+        width: 1.8,
+    };
+    let open = |road: &Road, x: f64, speed: f64, obstacles: &[Obstacle]| {
+        let mut target = TargetState::zeros();
+        target[idx::VX] = speed;
+        target[idx::X] = x;
+        target[idx::Y] = -3.6;
+        let input = ControllerInput {
+            time: 0.0,
+            target,
+            bullet: BulletState::zeros(),
+            target_input: TargetInput::zeros(),
+            road,
+            obstacles,
+        };
+        open_road(&s, &input)
+    };
+    assert!(open(&wide, 500.0, 18.0, &[]));
+    assert!(!open(&narrow, 500.0, 18.0, &[]));
+    assert!(
+        !open(&wide, 500.0, 25.0, &[]),
+        "faster than a PIT is done at"
+    );
+    assert!(
+        !open(&wide, 500.0, 18.0, &[car(600.0)]),
+        "a stopped car 100 m ahead"
+    );
+    assert!(open(&wide, 500.0, 18.0, &[car(700.0)]), "... 200 m ahead");
+    assert!(
+        !open(&bend, 300.0, 18.0, &[]),
+        "the bend begins 100 m ahead"
+    );
+    assert!(open(&bend, 100.0, 18.0, &[]), "... 300 m ahead");
 }
 
 /// On a slippery road the spin left at the end of the look-ahead turns the target further

@@ -146,8 +146,7 @@ def _bench_parser(sub) -> None:
     p.add_argument("--controller-config", metavar="TOML",
                    help="controller settings for the full-size scenes over each configuration's (the "
                         "[planner], [phases], [mpc] tables of docs/planner.md; fields not given keep "
-                        "theirs, e.g. the ablation's upper layer stays off; configs/controller_highway.toml "
-                        "for straight, wide, clear highways)")
+                        "theirs, e.g. the ablation's upper layer stays off)")
     p.add_argument("--controller-config-half-scale", metavar="TOML",
                    help="the same for the half-scale scenes (over the built-in "
                         "configs/controller_half_scale.toml)")
