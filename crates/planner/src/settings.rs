@@ -718,6 +718,11 @@ mod tests {
                 "phases.release_heading_tol",
             ),
             (
+                "[phases]\nopen_road_half_width = -1.0",
+                "phases.open_road_half_width",
+            ),
+            ("[phases]\nopen_road_speed = nan", "phases.open_road_speed"),
+            (
                 "[phases]\nrelease_rest_speed = nan",
                 "phases.release_rest_speed",
             ),
