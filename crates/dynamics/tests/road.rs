@@ -1,7 +1,7 @@
 //! Road geometry: hand-worked Frenet projections on straights and arcs, round trips on
 //! roads with clothoids, continuity at the joints, clothoid accuracy against a fine-step
-//! reference integration, edge distances of footprints, the specification format and its
-//! errors, and obstacles.
+//! reference integration, the sharpest curvature of a stretch, edge distances of
+//! footprints, the specification format and its errors, and obstacles.
 
 use dynamics::geometry::{Obb, Vec2};
 use dynamics::road::{Frenet, Obstacle, Road, RoadError, RoadSpec, SegmentSpec};
@@ -341,6 +341,31 @@ fn curve_turns_by_arc_plus_transition_over_radius() {
     let mirrored = p0 - 2.0 * (p0 - mid.point).dot(&mid.tangent()) * mid.tangent();
     assert!((mirrored - p1).norm() < 1e-9, "{mirrored:?} vs {p1:?}");
     assert!(((p0 - mid.point).dot(&n) - (p1 - mid.point).dot(&n)).abs() < 1e-9);
+}
+
+#[test]
+fn the_sharpest_curvature_of_a_stretch_is_sampled_at_its_stations() {
+    // Straight 0–100 m, a right-hand clothoid to 1/80 over 20 m, the arc 120–150 m, the
+    // clothoid back over 150–170 m, straight 170–270 m.
+    let road = Road::curved(100.0, -80.0, 30.0, 20.0, 3, 3.5, 2.0);
+    let k = -1.0 / 80.0;
+    // Stations 5, 15, …, 95 lie on the entry: straight.
+    assert_eq!(road.sharpest_curvature(5.0, 10.0, 0..=9), 0.0);
+    // One more station (105 m) reaches a quarter into the clothoid: signed as the road.
+    let ramp = road.sharpest_curvature(5.0, 10.0, 0..=10);
+    assert!((ramp - 0.25 * k).abs() < 1e-12, "{ramp}");
+    // From beyond the curve, looking back over it: the arc's curvature.
+    let back = road.sharpest_curvature(260.0, 10.0, -14..=0);
+    assert!((back - k).abs() < 1e-12, "{back}");
+    // Beyond the ends the line runs straight, and an empty stretch has no curvature.
+    assert_eq!(road.sharpest_curvature(300.0, 10.0, 0..=20), 0.0);
+    assert_eq!(
+        road.sharpest_curvature(130.0, 10.0, std::ops::RangeInclusive::new(1, 0)),
+        0.0
+    );
+    // A left-hand curve is positive.
+    let left = Road::curved(100.0, 80.0, 30.0, 20.0, 3, 3.5, 2.0);
+    assert!((left.sharpest_curvature(0.0, 5.0, 0..=60) + k).abs() < 1e-12);
 }
 
 /// `∫_0^s (cos θ, sin θ)` by composite Simpson with `n` steps and compensated summation.

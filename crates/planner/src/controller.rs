@@ -47,10 +47,11 @@ pub fn open_road(s: &crate::PhaseSettings, input: &ControllerInput<'_>) -> bool 
     }
     let s0 = input.road.project(at).s;
     let samples = (s.open_road_clear / STEP).ceil() as i64;
-    let straight = (-samples..=samples).all(|k| {
-        let pose = input.road.pose_at(s0 + k as f64 * STEP);
-        pose.curvature.abs() < STRAIGHT
-    });
+    let straight = input
+        .road
+        .sharpest_curvature(s0, STEP, -samples..=samples)
+        .abs()
+        < STRAIGHT;
     straight
         && input
             .obstacles

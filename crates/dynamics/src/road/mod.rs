@@ -284,6 +284,28 @@ impl Road {
         }
     }
 
+    /// The sharpest curvature (signed; the first of equal magnitude) of the reference line
+    /// at the stations `s + k · step`, `k` over `stations` in order; 0 when `stations` is
+    /// empty. Beyond the ends the line is straight (see [`Self::pose_at`]). A sampled
+    /// look over a stretch of road, e.g. "does the road the target reaches in 4 s bend?".
+    #[must_use]
+    pub fn sharpest_curvature(
+        &self,
+        s: f64,
+        step: f64,
+        stations: std::ops::RangeInclusive<i64>,
+    ) -> f64 {
+        stations
+            .map(|k| self.pose_at(s + k as f64 * step).curvature)
+            .fold(0.0, |sharpest, k| {
+                if k.abs() > sharpest.abs() {
+                    k
+                } else {
+                    sharpest
+                }
+            })
+    }
+
     /// World point at Frenet coordinates `(s, d)`.
     #[must_use]
     pub fn to_world(&self, s: f64, d: f64) -> Vec2 {

@@ -266,15 +266,9 @@ impl Planner {
         let f = input.road.project(Vec2::new(x[idx::X], x[idx::Y]));
         let reach = x[idx::VX].hypot(x[idx::VY]) * CURVE_LOOK;
         let step = 5.0 * self.len_scale;
-        let mut kappa = f.curvature;
-        let mut ds = step;
-        while ds <= reach {
-            let k = input.road.pose_at(f.s + ds).curvature;
-            if k.abs() > kappa.abs() {
-                kappa = k;
-            }
-            ds += step;
-        }
+        let kappa = input
+            .road
+            .sharpest_curvature(f.s, step, 0..=(reach / step).floor() as i64);
         if kappa.abs() * CURVE_RADIUS * self.len_scale < 1.0 {
             return None;
         }
