@@ -18,7 +18,7 @@ fn the_controller_step_allocates_nothing() {
     let params = ParamSet::builtin("full_size").unwrap();
     let mu = 0.9;
     let mut settings = ControllerSettings::default();
-    // Wall-clock limits out of the way: an unoptimised build is some 20x slower.
+    // Wall-clock limits out of the way: the test profile is slower than a release build.
     settings.mpc.time_budget = 10.0;
     settings.mpc.qp.time_limit = 10.0;
     settings.planner.qp.time_limit = 10.0;

@@ -11,9 +11,12 @@
 //! - SIGTERM ends the vehicle promptly, on the wall clock and in lock step, also when it
 //!   comes while the vehicle is stopped and a SIGCONT follows.
 //!
-//! Every process is bounded by a timeout. The binaries are the test profile's (debug): the
-//! controller runs the 4-DOF model without the upper layer and without a deadline, so that
-//! its answers keep pace with the wall clock on a slow machine.
+//! Every process is bounded by a timeout. The binaries are the test profile's (debug, at
+//! the workspace's `opt-level = 1`): the controller runs the 4-DOF model without the upper
+//! layer and without a deadline, so that its answers keep pace with the wall clock on a slow
+//! machine. Unoptimised, its cycle took about 90 ms on a 2-core machine busy with a
+//! benchmark, against the 100 ms a command stays valid, and every command came stale; at
+//! `opt-level = 1`, 10 ms.
 
 mod common;
 
