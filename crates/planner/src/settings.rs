@@ -413,9 +413,8 @@ pub struct PhaseSettings {
     pub let_go_turn: f64,
     /// The closed loop of the push: in contact, the bullet lets go the first control step
     /// the target left alone would meet the planner's terminal set with its projected
-    /// heading within this of the reversed heading (rad; at most the planner's
-    /// `heading_tol`, which the release's free rollout meets as well: a looser value is
-    /// refused, not ignored).
+    /// heading within this of the reversed heading (rad; the planner's `heading_tol` bounds
+    /// it as well).
     pub release_heading_tol: f64,
     /// The same on an open road (rad): a push begun on a straight, wide road with no
     /// obstacle near and the target no faster than the PIT is done at
@@ -656,33 +655,6 @@ impl ControllerSettings {
         if (self.planner.dt - self.mpc.dt).abs() > 1e-12 {
             return Err(invalid("planner.dt", "must equal mpc.dt"));
         }
-        // The release's free rollout must meet the planner's terminal set too, so a release
-        // tolerance beyond `heading_tol` would do nothing: refused rather than ignored.
-        for (name, v) in [
-            (
-                "phases.release_heading_tol",
-                self.phases.release_heading_tol,
-            ),
-            (
-                "phases.open_road_release_heading_tol",
-                self.phases.open_road_release_heading_tol,
-            ),
-            (
-                "phases.release_rest_heading_tol",
-                self.phases.release_rest_heading_tol,
-            ),
-        ] {
-            if v > self.planner.heading_tol {
-                return Err(invalid(
-                    name,
-                    format!(
-                        "must not exceed planner.heading_tol ({}): the release meets the \
-                         terminal set as well (got {v})",
-                        self.planner.heading_tol
-                    ),
-                ));
-            }
-        }
         let mpc_span = self.mpc.horizon as f64 * self.mpc.dt;
         if self.planner.horizon + 1e-9 < mpc_span + self.planner.replan_period.min(mpc_span) {
             return Err(invalid(
@@ -758,20 +730,6 @@ mod tests {
                 "[phases]\nrelease_rest_heading_tol = -0.1",
                 "phases.release_rest_heading_tol",
             ),
-            // The release meets the terminal set as well: a looser tolerance would do
-            // nothing.
-            (
-                "[phases]\nrelease_heading_tol = 0.75",
-                "phases.release_heading_tol",
-            ),
-            (
-                "[phases]\nopen_road_release_heading_tol = 0.7",
-                "phases.open_road_release_heading_tol",
-            ),
-            (
-                "[planner]\nheading_tol = 0.25",
-                "phases.release_heading_tol",
-            ),
             ("[planner]\ndt = 0.1", "planner.dt"),
             ("[planner]\napproach_accel_min = -1.0", "approach_accel_min"),
             ("[mpc]\nhorizon = 1", "horizon"),
@@ -782,10 +740,6 @@ mod tests {
                 .to_string();
             assert!(e.contains(field), "{text:?} gave {e:?}");
         }
-        ControllerSettings::from_toml_str(
-            "[planner]\nheading_tol = 0.8\n[phases]\nrelease_heading_tol = 0.75",
-        )
-        .unwrap();
         let e = ControllerSettings::from_toml_str("[planner]\nhorizn = 2.0")
             .unwrap_err()
             .to_string();
