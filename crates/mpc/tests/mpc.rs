@@ -7,7 +7,8 @@ use dynamics::road::Obstacle;
 use mpc::{MpcSettings, MpcStatus, ScpMode, SolveError};
 
 /// Default settings with wall-clock limits out of the way: these tests check behaviour, and
-/// the test profile (`cargo test`, opt-level 1, debug assertions) is slower than a release build.
+/// the test profile (`cargo test`: opt-level 1, debug assertions) is slower than a release
+/// build.
 fn settings() -> MpcSettings {
     let d = MpcSettings::default();
     MpcSettings {

@@ -29,8 +29,8 @@ fn run(side: f64, upper: bool) -> Run {
         upper_layer: upper,
         ..ControllerSettings::default()
     };
-    // Wall-clock limits out of the way (the test profile is slower than a release build); the
-    // outcome then does not depend on the machine.
+    // Wall-clock limits out of the way (the test profile is slower than a release build):
+    // the outcome then does not depend on the machine.
     settings.mpc.time_budget = 10.0;
     settings.mpc.qp.time_limit = 10.0;
     settings.planner.qp.time_limit = 10.0;
