@@ -113,8 +113,18 @@ impl Planner {
         // plan after plan. One still closing in has not arrived.
         let tol = ARRIVAL_TOL * k;
         let (band_lo, band_hi) = (c.rel_pos.x + lo - x0 - tol, c.rel_pos.x + hi - x0 + tol);
+        let in_band = |x: f64| (band_lo..=band_hi).contains(&x);
         let waiting = rel_vel.x.abs() < WAITING_SPEED * k.sqrt();
-        let arrived = waiting && (band_lo..=band_hi).contains(&rel.x);
+        let arrived = waiting && in_band(rel.x);
+        // Nor is one in the band drifting away from its station that would come to rest in
+        // the band: it arrives when it has stopped (|v|/a), where it would be waiting.
+        // Brought back to the station first, a bullet running 0.65 m/s past the band on a
+        // slippery road was 1.7 s from it, no window fitted, and the chase's braking left it
+        // metres behind (`picopit trace sc-00093`). One closing in on its station keeps its
+        // approach: committed early, it struck nearer the target's centre of mass, harder,
+        // and lost textbook pushes.
+        let drifting_off = rel_vel.x * (goal - rel.x) < 0.0;
+        let stops_in_band = drifting_off && in_band(rel.x) && in_band(stop);
         // Touching counts on the side the bullet is on only: a bullet pressing on the
         // target's right has not arrived on its left (a plan in contact that was not yet
         // committed to a side took the far side's push for one under way).
@@ -138,6 +148,8 @@ impl Planner {
                 + Profile::new(behind.min(rel.x), 0.0, goal_along, a, cap).time()
         } else if arrived {
             0.0
+        } else if stops_in_band {
+            rel_vel.x.abs() / a
         } else {
             Profile::new(rel.x, rel_vel.x, goal, a, cap).time()
         };
