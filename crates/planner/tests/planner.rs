@@ -389,7 +389,9 @@ fn a_bullet_waiting_within_the_band_of_contact_points_commits() {
 /// has arrived: it commits. Closing 0.8 m first would take 1.9 s and leave no window in the
 /// look-ahead, plan after plan. So does one drifting off the band at 0.5 m/s that stops
 /// within that metre (0.14 m on): it has arrived once it has stopped, 0.57 s on. The same
-/// bullet drifting at 1.5 m/s stops 1.3 m on, beyond the metre: it chases.
+/// bullet drifting at 1.5 m/s stops 1.3 m on, beyond the metre: it chases. One closing in
+/// at 0.5 m/s from 0.8 m off the band would stop inside the metre too, but it is on its way
+/// to its station and keeps its approach (1.5 s): it chases.
 #[test]
 fn a_bullet_waiting_just_off_the_band_commits_on_a_slippery_road() {
     let s = PlannerSettings::default();
@@ -418,6 +420,8 @@ fn a_bullet_waiting_just_off_the_band_commits_on_a_slippery_road() {
         (front + 0.25, 0.5, true),
         (back - 0.25, -1.5, false),
         (front + 0.25, 1.5, false),
+        (back - 0.8, 0.5, false),
+        (front + 0.8, -0.5, false),
     ] {
         let (xt, xb) = states(&road, rx, c.rel_pos.y + s.standoff, 12.0, 12.0 + drift);
         let pkg = planner.plan(&input(&road, &[], xt, xb)).unwrap();
