@@ -77,7 +77,9 @@ impl Planner {
     /// to rest relative to the target if it braked now: a bullet waiting a little behind the
     /// rear-quarter station, or one that will stop a little short of it, is already at a
     /// station. The time is the approach along the target ([`Profile`], from the bullet's
-    /// relative position and speed, arriving at rest relative to the target), moving across
+    /// relative position and speed, arriving at rest relative to the target; nothing for a
+    /// bullet waiting within `ARRIVAL_TOL` of the band, and only its stop for one drifting
+    /// away from its station that would come to rest within it), moving across
     /// at the crossing speed ([`Self::crossing_speed`]) at the same time, plus a settling
     /// time; crossing behind the target to the other side first drops back behind its rear
     /// bumper.
