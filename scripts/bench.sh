@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Run the criterion benches of the pure-Rust crates and gate their medians against
-# benches/thresholds.toml (see docs/BENCHMARKS.md). A gate over its limit is measured once
-# more (its bench and its binary's references) before the script fails: on a shared machine
-# a neighbour's burst can slow one bench and neither reference. Extra arguments go to
-# `cargo bench`.
+# benches/thresholds.toml (see docs/BENCHMARKS.md). A gate over its limit is measured again
+# (its bench and its binary's references, in a new bench process), up to twice, before the
+# script fails: on a shared machine a neighbour's burst can slow one bench and neither
+# reference, and the surrogate steps run in a fast or a slow mode from one bench process to
+# the next (docs/BENCHMARKS.md). Extra arguments go to `cargo bench`.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -51,20 +52,25 @@ run_bench picopit-vehicle-io ipc
 if python3 scripts/bench_gate.py; then
     exit 0
 fi
-echo "bench: measuring the benches over their limit once more"
-retries=$(python3 scripts/bench_gate.py --failing)
-while read -r binary filter; do
-    [ -n "$binary" ] || continue
-    package=$(package_of "$binary")
-    echo "bench: cargo bench ($package: $binary, $filter)"
-    set +e
-    cargo bench -p "$package" --bench "$binary" "${EXTRA[@]}" -- "$filter" 2>&1 \
-        | grep -vE '^(Benchmarking |Gnuplot not found)'
-    status=${PIPESTATUS[0]}
-    set -e
-    if [ "$status" -ne 0 ]; then
-        echo "bench: cargo bench failed (exit $status)" >&2
-        exit "$status"
+for attempt in 1 2; do
+    echo "bench: measuring the benches over their limit again ($attempt of 2)"
+    retries=$(python3 scripts/bench_gate.py --failing)
+    while read -r binary filter; do
+        [ -n "$binary" ] || continue
+        package=$(package_of "$binary")
+        echo "bench: cargo bench ($package: $binary, $filter)"
+        set +e
+        cargo bench -p "$package" --bench "$binary" "${EXTRA[@]}" -- "$filter" 2>&1 \
+            | grep -vE '^(Benchmarking |Gnuplot not found)'
+        status=${PIPESTATUS[0]}
+        set -e
+        if [ "$status" -ne 0 ]; then
+            echo "bench: cargo bench failed (exit $status)" >&2
+            exit "$status"
+        fi
+    done <<<"$retries"
+    if python3 scripts/bench_gate.py; then
+        exit 0
     fi
-done <<<"$retries"
-python3 scripts/bench_gate.py
+done
+exit 1
