@@ -4,12 +4,11 @@
 //! chase back.
 
 use dynamics::road::Obstacle;
-use dynamics::target4dof::FourDofTarget;
 use dynamics::TargetInput;
 mod common;
 
-use common::{input, params, planner, road, states};
-use planner::{Infeasible, Mode, Planner, PlannerSettings};
+use common::{input, params, planner, planner_on, road, states};
+use planner::{Infeasible, Mode, PlannerSettings};
 /// A bullet waiting on the stand-off line a little behind the rear-quarter station is at a
 /// station already: the contact points the planner tries (`contact_offsets`, the rear
 /// quarter and 0.4 m behind it) form a band, and its earliest arrival is at the point of the
@@ -21,10 +20,7 @@ fn a_bullet_waiting_within_the_band_of_contact_points_commits() {
     let s = PlannerSettings::default();
     let p = params();
     let mu = 0.3;
-    let mut settings = s.clone();
-    settings.qp.time_limit = 10.0;
-    let model = Box::new(FourDofTarget::new(&p.target, mu, settings.dt));
-    let mut planner = Planner::new(&p, mu, model, settings).unwrap();
+    let mut planner = planner_on(s.clone(), mu);
     let x_rq = mpc::reference::rear_quarter_x(&p);
     let c = mpc::reference::pit_stage_at(
         &p,
@@ -74,10 +70,7 @@ fn a_bullet_waiting_just_off_the_band_commits_on_a_slippery_road() {
     let s = PlannerSettings::default();
     let p = params();
     let mu = 0.15;
-    let mut settings = s.clone();
-    settings.qp.time_limit = 10.0;
-    let model = Box::new(FourDofTarget::new(&p.target, mu, settings.dt));
-    let mut planner = Planner::new(&p, mu, model, settings).unwrap();
+    let mut planner = planner_on(s.clone(), mu);
     let c = mpc::reference::pit_stage_at(
         &p,
         mpc::Side::Left,

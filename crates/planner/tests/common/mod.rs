@@ -15,11 +15,16 @@ pub fn params() -> ParamSet {
 
 /// A planner with the QP's wall-clock limit out of the way: an unoptimised build is some
 /// 20x slower, and a QP stopped by the clock would make the outcome machine-dependent.
-pub fn planner(mut settings: PlannerSettings) -> Planner {
+pub fn planner(settings: PlannerSettings) -> Planner {
+    planner_on(settings, 0.9)
+}
+
+/// [`planner`] on a road of adhesion `mu`.
+pub fn planner_on(mut settings: PlannerSettings, mu: f64) -> Planner {
     settings.qp.time_limit = 10.0;
     let p = params();
-    let model = Box::new(FourDofTarget::new(&p.target, 0.9, settings.dt));
-    Planner::new(&p, 0.9, model, settings).unwrap()
+    let model = Box::new(FourDofTarget::new(&p.target, mu, settings.dt));
+    Planner::new(&p, mu, model, settings).unwrap()
 }
 
 pub fn road() -> Road {
