@@ -19,9 +19,9 @@ pytestmark = pytest.mark.skipif(not has("run_episode"), reason="sim::episode not
 REPO = Path(__file__).resolve().parents[1]
 TEXTBOOK = REPO / "data" / "textbook" / "scenarios.jsonl"
 MODELS = REPO / "models"
-# Textbook scenes whose lane-keeping target, pushed round with the release of other roads
-# (0.6 rad), rolls backwards into a reversing lane change and stops 20-23 deg off the reversed
-# heading (docs/RESULTS.md, "Textbook PIT scenes").
+# Textbook scenes whose lane-keeping target, pushed round with a release at 0.6 rad (the other
+# roads' release when this was measured; 0.9 since), rolls backwards into a reversing lane
+# change and stops 20-23 deg off the reversed heading (docs/RESULTS.md, "Textbook PIT scenes").
 LANE_KEEPERS = ["sc-00012", "sc-00041", "sc-00080", "sc-00146"]
 
 
