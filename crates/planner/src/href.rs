@@ -86,13 +86,13 @@ pub fn fill_reference(
         fn_hi: 0.0,
         envelope_lat: pkg.envelope_lat,
     };
-    let stand = Vec2::new(contact.rel_pos.x, contact.rel_pos.y + side * s.standoff);
+    let stand = Vec2::new(contact.rel_pos.x, contact.rel_pos.y + side * pkg.standoff);
     // Fully behind the target's rear bumper (the contact station is at its rear quarter).
     let behind_x = contact.rel_pos.x - HOLD_BACK * ls;
     let back = StageReference {
         rel_pos: Vec2::new(
             contact.rel_pos.x - 3.0 * ls,
-            contact.rel_pos.y + side * (s.standoff + 1.0 * ls),
+            contact.rel_pos.y + side * (pkg.standoff + 1.0 * ls),
         ),
         rel_heading: 0.0,
         rel_speed: -2.0 * ls.sqrt(),

@@ -109,6 +109,9 @@ pub struct DecisionPackage {
     /// `lateral_speed`, more while the target drifts across the bullet's line towards the
     /// far side it crosses to.
     pub lateral_speed: f64,
+    /// The bullet's stand-off beside the contact line while it waits (m): wider on the
+    /// outside of a curve (`PlannerSettings::outside_standoff`).
+    pub standoff: f64,
     /// T_c = [t0, t1] (absolute s); empty (t1 < t0) when no window is planned.
     pub window: (f64, f64),
     /// X_T,f and S_post.
@@ -154,6 +157,7 @@ impl DecisionPackage {
             envelope_lat: 1.0,
             approach: Profile::new(0.0, 0.0, 0.0, 1.0, 1.0),
             lateral_speed: 1.0,
+            standoff: 0.6,
             window: (f64::INFINITY, f64::NEG_INFINITY),
             terminal: TerminalSet {
                 heading: 0.0,

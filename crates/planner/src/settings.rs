@@ -144,6 +144,12 @@ pub struct PlannerSettings {
     pub settle_time: f64,
     /// Stand-off outside the contact line while closing in (m).
     pub standoff: f64,
+    /// The stand-off on the outside of a curve (m; `Planner`'s side choice): turning in
+    /// towards the inside, the bullet has the curve's share of its grip less for the turn-in
+    /// (on the inside, more), and from `standoff` it touches shallower and slower than the
+    /// push needs. The extra width is closed by the turn-in: the earliest arrival does not
+    /// count it. `standoff` or more.
+    pub outside_standoff: f64,
     /// Time before the window at which the bullet turns in (s).
     pub turn_in: f64,
     /// Terminal set X_T,f: the projected heading `ψ_N + τ r_N` within `heading_tol` of the
@@ -212,6 +218,7 @@ impl Default for PlannerSettings {
             crossing_speed: 1.5,
             settle_time: 0.3,
             standoff: 0.6,
+            outside_standoff: 1.2,
             turn_in: 0.4,
             heading_tol: 0.9,
             push_round: false,
@@ -314,6 +321,7 @@ impl PlannerSettings {
             ("push_speed", self.push_speed),
             ("settle_time", self.settle_time),
             ("standoff", self.standoff),
+            ("outside_standoff", self.outside_standoff),
             ("turn_in", self.turn_in),
             ("yaw_decay", self.yaw_decay),
             ("road_margin", self.road_margin),
@@ -330,6 +338,15 @@ impl PlannerSettings {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(name, format!("must be finite and >= 0 (got {v})")));
             }
+        }
+        if self.outside_standoff < self.standoff {
+            return Err(invalid(
+                "outside_standoff",
+                format!(
+                    "must be at least standoff ({} m; got {})",
+                    self.standoff, self.outside_standoff
+                ),
+            ));
         }
         let steps = self.horizon / self.dt;
         if (steps - steps.round()).abs() > 1e-9 || !(4.0..=400.0).contains(&steps.round()) {
@@ -732,6 +749,10 @@ mod tests {
             ),
             ("[planner]\ndt = 0.1", "planner.dt"),
             ("[planner]\napproach_accel_min = -1.0", "approach_accel_min"),
+            (
+                "[planner]\nstandoff = 0.6\noutside_standoff = 0.5",
+                "outside_standoff",
+            ),
             ("[mpc]\nhorizon = 1", "horizon"),
         ];
         for (text, field) in cases {

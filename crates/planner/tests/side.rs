@@ -177,3 +177,57 @@ fn a_target_drifting_across_the_bullets_line_speeds_its_crossing() {
         pkg.lateral_speed
     );
 }
+
+/// On the outside of a curve the bullet waits `outside_standoff` beside the contact line:
+/// turning in towards the inside it has the curve's share of its grip less, and from the
+/// narrower stand-off it touches shallower and slower than on the inside. The wider
+/// stand-off is the turn-in's to close: a bullet waiting on it is given the window a bullet
+/// waiting on the narrower line is. The inside keeps `standoff`.
+#[test]
+fn on_the_outside_of_a_curve_the_bullet_waits_wider_for_the_same_window() {
+    use mpc::reference::Side;
+    // A left curve 20 m ahead: the target's right is its outside.
+    let road = Road::curved(120.0, 150.0, 400.0, 30.0, 3, 3.5, 1.0);
+    let p = common::params();
+    let plan = |outside_standoff: f64, side: Side| {
+        let s = PlannerSettings {
+            outside_standoff,
+            ..PlannerSettings::default()
+        };
+        let c = mpc::reference::pit_stage_at(
+            &p,
+            side,
+            mpc::reference::rear_quarter_x(&p),
+            s.contact_angle,
+            s.overlap,
+            s.push_speed,
+            (0.0, 0.0),
+        );
+        let wait = if side == Side::Right {
+            outside_standoff
+        } else {
+            s.standoff
+        };
+        let (xt, xb) = states(
+            &road,
+            c.rel_pos.x,
+            c.rel_pos.y + side.sign() * wait,
+            18.0,
+            18.0,
+        );
+        let mut inp = input(&road, &[], xt, xb);
+        inp.side = Some(side);
+        let pkg = planner(s).plan(&inp).unwrap().clone();
+        (pkg.standoff, pkg.mode, pkg.window.0)
+    };
+    let narrow = plan(0.6, Side::Right);
+    let wide = plan(1.2, Side::Right);
+    assert_eq!((narrow.0, wide.0), (0.6, 1.2));
+    assert_eq!(wide.1, planner::Mode::Pit, "{wide:?}");
+    assert!(
+        wide.2.is_finite() && (wide.2 - narrow.2).abs() < 1e-9,
+        "{narrow:?} {wide:?}"
+    );
+    let inside = plan(1.2, Side::Left);
+    assert_eq!(inside.0, 0.6);
+}

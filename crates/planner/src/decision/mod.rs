@@ -217,6 +217,9 @@ pub struct Planner {
     /// to, if the bullet has room there ([`Planner::curve_side`]); on a straight, against
     /// a driverless target's drift, else the roomier side ([`Planner::roomier_side`]).
     inside: Option<Side>,
+    /// The inside of the curve the target is on or coming to ([`Planner::curve_side`]),
+    /// taken by `begin`.
+    curve: Option<Side>,
     /// The side against a driverless target's drift on a straight, decided once per
     /// maneuver ([`Planner::against_drift`]).
     drift: Drift,
@@ -337,6 +340,7 @@ impl Planner {
             contact_point: Vec2::zeros(),
             contact_x: rear_quarter_x(params),
             psi_rev: 0.0,
+            curve: None,
             inside: None,
             drift: Drift::Unseen,
             input_u: TargetInput::zeros(),
@@ -439,6 +443,7 @@ impl Planner {
         self.input_u = input.target_input;
         self.lane_keeper = None;
         self.contact_x = self.contact_x_at(0.0);
+        self.curve = self.curve_side(input);
         input
             .road
             .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))

@@ -246,6 +246,7 @@ impl Planner {
         let c = self.contact_pose(self.side);
         let lateral_speed =
             self.crossing_speed(self.side, input.road, &input.target, &input.bullet);
+        let standoff = self.standoff(self.side);
         let p = &mut self.package;
         p.mode = mode;
         p.infeasible = infeasible;
@@ -267,6 +268,7 @@ impl Planner {
             BRAKE_MARGIN,
         );
         p.lateral_speed = lateral_speed;
+        p.standoff = standoff;
         p.window = match chosen {
             Some(o) => (
                 input.time + o.k0 as f64 * s.dt,

@@ -57,6 +57,16 @@ impl Planner {
         )
     }
 
+    /// The bullet's stand-off (m) beside the contact line on `side`: `outside_standoff` on
+    /// the outside of the curve the target is on or coming to, else `standoff`.
+    pub(super) fn standoff(&self, side: Side) -> f64 {
+        if self.curve.is_some_and(|c| c != side) {
+            self.settings.outside_standoff
+        } else {
+            self.settings.standoff
+        }
+    }
+
     /// The contact point's body x for offset `offset` from the rear quarter (clamped as
     /// [`Self::clamp_contact_x`]).
     pub(super) fn contact_x_at(&self, offset: f64) -> f64 {
@@ -105,7 +115,9 @@ impl Planner {
         let x_c = (x0 + stop - c.rel_pos.x).clamp(lo, hi);
         let goal = c.rel_pos.x + x_c - x0;
         let dx = (goal - rel.x).abs();
-        let dy = (c.rel_pos.y - rel.y).abs();
+        // The stand-off beyond the built-in one is closed by the turn-in, not the approach.
+        let extra = self.standoff(side) - s.standoff;
+        let dy = ((c.rel_pos.y - rel.y).abs() - extra).max(0.0);
         let k = self.len_scale;
         // A bullet waiting within `ARRIVAL_TOL` of the band (the MPC holds it a few tenths of
         // a metre off its station, swaying at a few tenths of a metre per second) has
@@ -226,7 +238,7 @@ impl Planner {
             obstacles: input.obstacles,
         };
         let stand = chase::StandOff {
-            rel_pos: Vec2::new(c.rel_pos.x, c.rel_pos.y + side.sign() * s.standoff),
+            rel_pos: Vec2::new(c.rel_pos.x, c.rel_pos.y + side.sign() * self.standoff(side)),
             rel_heading: 0.0,
         };
         let from = (t_arr - chase::BESIDE).clamp(0.0, horizon);
