@@ -62,7 +62,7 @@ impl Planner {
     /// bullet works on: inside the curve ahead, or on a straight against the target's own
     /// drift ([`Self::against_drift`]); the package is not touched.
     pub(super) fn free_rollout_reverses(&mut self, input: &PlannerInput<'_>, lane: f64) -> bool {
-        let curve = self.curve_side(input);
+        let curve = self.curve;
         self.inside = curve.filter(|&side| self.side_open(side, input));
         let reverses = self.free_rollout_within(input, lane, self.settings.heading_tol, true);
         if self.inside.is_none() {

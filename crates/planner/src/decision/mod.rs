@@ -218,7 +218,8 @@ pub struct Planner {
     /// a driverless target's drift, else the roomier side ([`Planner::roomier_side`]).
     inside: Option<Side>,
     /// The inside of the curve the target is on or coming to ([`Planner::curve_side`]),
-    /// taken by `begin`.
+    /// taken by the calls that fill the package (`plan`, `predict`; not the closed loop's
+    /// `push_done`, every control step in contact, which does not need it).
     curve: Option<Side>,
     /// The side against a driverless target's drift on a straight, decided once per
     /// maneuver ([`Planner::against_drift`]).
@@ -443,7 +444,6 @@ impl Planner {
         self.input_u = input.target_input;
         self.lane_keeper = None;
         self.contact_x = self.contact_x_at(0.0);
-        self.curve = self.curve_side(input);
         input
             .road
             .project(Vec2::new(input.target[idx::X], input.target[idx::Y]))
@@ -457,6 +457,7 @@ impl Planner {
     pub fn plan(&mut self, input: &PlannerInput<'_>) -> Result<&DecisionPackage, PlanError> {
         check_input(input)?;
         let lane = self.begin(input);
+        self.curve = self.curve_side(input);
         // The target reverses without further push (a PIT under way that has done its
         // work, or a target spinning out by itself): the decision is to stop pushing. The
         // package still reports the predicted margins. A push that turns the target round
@@ -630,6 +631,7 @@ impl Planner {
             return Err(PlanError::TooManyObstacles);
         }
         let lane = self.begin(input);
+        self.curve = self.curve_side(input);
         let side = self.bullet_side(input);
         self.setup_candidate(side, self.n, lane);
         self.forces.iter_mut().for_each(|f| *f = Vec2::zeros());
