@@ -375,6 +375,21 @@ impl PlannerSettings {
                 "must be finite, >= 0 and strictly ascending",
             ));
         }
+        // A bullet waiting on its stand-off line arrives `settle_time + standoff /
+        // lateral_speed` from now (`Planner::earliest_arrival`); a window that does not fit
+        // the horizon after that is never planned, and the bullet chases until `T_max`.
+        let wait = self.settle_time + self.standoff / self.lateral_speed;
+        let first_step = ((wait + self.start_offsets[0]) / self.dt - 1e-9).ceil();
+        if first_step + self.window_steps() as f64 > self.steps() as f64 {
+            return Err(invalid(
+                "window",
+                format!(
+                    "must fit the {} s horizon after a waiting bullet's arrival, {wait:.2} s \
+                     (settle_time + standoff / lateral_speed); got {} s",
+                    self.horizon, self.window
+                ),
+            ));
+        }
         if self.row_stride == 0 || self.row_stride > self.steps() {
             return Err(invalid("row_stride", "must be in 1..=steps"));
         }
@@ -725,6 +740,11 @@ mod tests {
         let cases = [
             ("[planner]\nhorizon = 2.01", "horizon"),
             ("[planner]\nwindow = 3.0", "window"),
+            ("[planner]\nwindow = 1.2", "window"),
+            (
+                "[planner]\nsettle_time = 0.6\nlateral_speed = 0.5",
+                "window",
+            ),
             ("[planner]\nstart_offsets = [0.3, 0.1]", "start_offsets"),
             ("[planner]\nforce_max_g = -1.0", "force_max_g"),
             ("[planner.weights]\npenalty = 0.0", "weights.penalty"),
