@@ -150,6 +150,11 @@ pub struct PlannerSettings {
     /// push needs. The extra width is closed by the turn-in: the earliest arrival does not
     /// count it. `standoff` or more.
     pub outside_standoff: f64,
+    /// The road adhesion μ from which the bullet waits `outside_standoff` wide; below it,
+    /// `standoff`. On a slippery road the turn-in does not close the extra width before the
+    /// window: the window opens and slides on, plan after plan, and the bullet never
+    /// touches.
+    pub outside_standoff_mu: f64,
     /// Time before the window at which the bullet turns in (s).
     pub turn_in: f64,
     /// Terminal set X_T,f: the projected heading `ψ_N + τ r_N` within `heading_tol` of the
@@ -219,6 +224,7 @@ impl Default for PlannerSettings {
             settle_time: 0.3,
             standoff: 0.6,
             outside_standoff: 1.2,
+            outside_standoff_mu: 0.6,
             turn_in: 0.4,
             heading_tol: 0.9,
             push_round: false,
@@ -322,6 +328,7 @@ impl PlannerSettings {
             ("settle_time", self.settle_time),
             ("standoff", self.standoff),
             ("outside_standoff", self.outside_standoff),
+            ("outside_standoff_mu", self.outside_standoff_mu),
             ("turn_in", self.turn_in),
             ("yaw_decay", self.yaw_decay),
             ("road_margin", self.road_margin),

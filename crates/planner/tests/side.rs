@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{input, planner, road, states};
+use common::{input, planner, planner_on, road, states};
 use dynamics::road::Road;
 use dynamics::TargetInput;
 use planner::{Planner, PlannerSettings};
@@ -182,14 +182,15 @@ fn a_target_drifting_across_the_bullets_line_speeds_its_crossing() {
 /// turning in towards the inside it has the curve's share of its grip less, and from the
 /// narrower stand-off it touches shallower and slower than on the inside. The wider
 /// stand-off is the turn-in's to close: a bullet waiting on it is given the window a bullet
-/// waiting on the narrower line is. The inside keeps `standoff`.
+/// waiting on the narrower line is. The inside keeps `standoff`, and so does a slippery
+/// road (`outside_standoff_mu`).
 #[test]
 fn on_the_outside_of_a_curve_the_bullet_waits_wider_for_the_same_window() {
     use mpc::reference::Side;
     // A left curve 20 m ahead: the target's right is its outside.
     let road = Road::curved(120.0, 150.0, 400.0, 30.0, 3, 3.5, 1.0);
     let p = common::params();
-    let plan = |outside_standoff: f64, side: Side| {
+    let plan_on = |outside_standoff: f64, side: Side, mu: f64| {
         let s = PlannerSettings {
             outside_standoff,
             ..PlannerSettings::default()
@@ -217,9 +218,10 @@ fn on_the_outside_of_a_curve_the_bullet_waits_wider_for_the_same_window() {
         );
         let mut inp = input(&road, &[], xt, xb);
         inp.side = Some(side);
-        let pkg = planner(s).plan(&inp).unwrap().clone();
+        let pkg = planner_on(s, mu).plan(&inp).unwrap().clone();
         (pkg.standoff, pkg.mode, pkg.window.0)
     };
+    let plan = |outside_standoff: f64, side: Side| plan_on(outside_standoff, side, 0.9);
     let narrow = plan(0.6, Side::Right);
     let wide = plan(1.2, Side::Right);
     assert_eq!((narrow.0, wide.0), (0.6, 1.2));
@@ -230,4 +232,48 @@ fn on_the_outside_of_a_curve_the_bullet_waits_wider_for_the_same_window() {
     );
     let inside = plan(1.2, Side::Left);
     assert_eq!(inside.0, 0.6);
+    // Below `outside_standoff_mu` the turn-in would not close the extra width: the outside
+    // keeps `standoff` too.
+    let slippery = PlannerSettings::default().outside_standoff_mu - 0.1;
+    assert_eq!(plan_on(1.2, Side::Right, slippery).0, 0.6);
+}
+
+/// The width the turn-in closes on the outside of a curve is still to be crossed: a bullet
+/// half-way across it, on the inside's narrower line, has not arrived at its contact pose,
+/// and its window does not open at once (before the fix it did, plan after plan, while the
+/// bullet never touched: `picopit trace sc-00019`).
+#[test]
+fn half_way_across_the_outside_stand_off_is_not_at_the_contact_pose() {
+    use mpc::reference::Side;
+    let road = Road::curved(120.0, 150.0, 400.0, 30.0, 3, 3.5, 1.0);
+    let p = common::params();
+    let s = PlannerSettings::default();
+    let c = mpc::reference::pit_stage_at(
+        &p,
+        Side::Right,
+        mpc::reference::rear_quarter_x(&p),
+        s.contact_angle,
+        s.overlap,
+        s.push_speed,
+        (0.0, 0.0),
+    );
+    let at = |off: f64| {
+        let (xt, xb) = states(&road, c.rel_pos.x, c.rel_pos.y - off, 18.0, 18.0);
+        let mut inp = input(&road, &[], xt, xb);
+        inp.side = Some(Side::Right);
+        let pkg = planner(s.clone()).plan(&inp).unwrap().clone();
+        assert_eq!(pkg.mode, planner::Mode::Pit, "{pkg:?}");
+        (pkg.standoff, pkg.window.0 - inp.time)
+    };
+    let (standoff, touching) = at(0.0);
+    assert_eq!(standoff, s.outside_standoff);
+    assert!(
+        touching < 1e-9,
+        "at the contact pose the window opens now: {touching}"
+    );
+    let (_, half_way) = at(s.standoff);
+    assert!(
+        half_way >= s.settle_time - 1e-9,
+        "0.6 m off the contact line the window opens after the settle time: {half_way}"
+    );
 }

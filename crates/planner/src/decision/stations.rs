@@ -58,9 +58,10 @@ impl Planner {
     }
 
     /// The bullet's stand-off (m) beside the contact line on `side`: `outside_standoff` on
-    /// the outside of the curve the target is on or coming to, else `standoff`.
+    /// the outside of the curve the target is on or coming to, where the road's adhesion is
+    /// `outside_standoff_mu` or more; else `standoff`.
     pub(super) fn standoff(&self, side: Side) -> f64 {
-        if self.curve.is_some_and(|c| c != side) {
+        if self.curve.is_some_and(|c| c != side) && self.mu >= self.settings.outside_standoff_mu {
             self.settings.outside_standoff
         } else {
             self.settings.standoff
@@ -117,7 +118,8 @@ impl Planner {
         let dx = (goal - rel.x).abs();
         // The stand-off beyond the built-in one is closed by the turn-in, not the approach.
         let extra = self.standoff(side) - s.standoff;
-        let dy = ((c.rel_pos.y - rel.y).abs() - extra).max(0.0);
+        let off_line = (c.rel_pos.y - rel.y).abs();
+        let dy = (off_line - extra).max(0.0);
         let k = self.len_scale;
         // A bullet waiting within `ARRIVAL_TOL` of the band (the MPC holds it a few tenths of
         // a metre off its station, swaying at a few tenths of a metre per second) has
@@ -143,7 +145,9 @@ impl Planner {
         // target's right has not arrived on its left (a plan in contact that was not yet
         // committed to a side took the far side's push for one under way).
         let own_side = side.sign() * rel.y >= 0.0;
-        if dx.hypot(dy) < 0.3 * k || (own_side && self.gap(xt, xb) < 0.1 * k) {
+        // At the contact pose by the bullet's true offset: the width taken off `dy` is
+        // still to be crossed.
+        if dx.hypot(off_line) < 0.3 * k || (own_side && self.gap(xt, xb) < 0.1 * k) {
             // At the contact pose, or touching already: a PIT under way.
             return (0.0, x_c);
         }
