@@ -284,6 +284,13 @@ impl PlannerSettings {
         (self.window / self.dt).round().max(1.0) as usize
     }
 
+    /// The first plan step at or after `t` s from now: where a window that may open at `t`
+    /// begins.
+    #[must_use]
+    pub fn step_at(&self, t: f64) -> usize {
+        (t / self.dt - 1e-9).ceil().max(0.0) as usize
+    }
+
     /// Check every field.
     ///
     /// # Errors
@@ -386,8 +393,7 @@ impl PlannerSettings {
         // lateral_speed` from now (`Planner::earliest_arrival`); a window that does not fit
         // the horizon after that is never planned, and the bullet chases until `T_max`.
         let wait = self.settle_time + self.standoff / self.lateral_speed;
-        let first_step = ((wait + self.start_offsets[0]) / self.dt - 1e-9).ceil();
-        if first_step + self.window_steps() as f64 > self.steps() as f64 {
+        if self.step_at(wait + self.start_offsets[0]) + self.window_steps() > self.steps() {
             return Err(invalid(
                 "window",
                 format!(

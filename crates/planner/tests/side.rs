@@ -189,21 +189,12 @@ fn on_the_outside_of_a_curve_the_bullet_waits_wider_for_the_same_window() {
     use mpc::reference::Side;
     // A left curve 20 m ahead: the target's right is its outside.
     let road = Road::curved(120.0, 150.0, 400.0, 30.0, 3, 3.5, 1.0);
-    let p = common::params();
     let plan_on = |outside_standoff: f64, side: Side, mu: f64| {
         let s = PlannerSettings {
             outside_standoff,
             ..PlannerSettings::default()
         };
-        let c = mpc::reference::pit_stage_at(
-            &p,
-            side,
-            mpc::reference::rear_quarter_x(&p),
-            s.contact_angle,
-            s.overlap,
-            s.push_speed,
-            (0.0, 0.0),
-        );
+        let c = contact_pose(&s, side);
         let wait = if side == Side::Right {
             outside_standoff
         } else {
@@ -246,17 +237,8 @@ fn on_the_outside_of_a_curve_the_bullet_waits_wider_for_the_same_window() {
 fn half_way_across_the_outside_stand_off_is_not_at_the_contact_pose() {
     use mpc::reference::Side;
     let road = Road::curved(120.0, 150.0, 400.0, 30.0, 3, 3.5, 1.0);
-    let p = common::params();
     let s = PlannerSettings::default();
-    let c = mpc::reference::pit_stage_at(
-        &p,
-        Side::Right,
-        mpc::reference::rear_quarter_x(&p),
-        s.contact_angle,
-        s.overlap,
-        s.push_speed,
-        (0.0, 0.0),
-    );
+    let c = contact_pose(&s, Side::Right);
     let at = |off: f64| {
         let (xt, xb) = states(&road, c.rel_pos.x, c.rel_pos.y - off, 18.0, 18.0);
         let mut inp = input(&road, &[], xt, xb);
@@ -276,4 +258,18 @@ fn half_way_across_the_outside_stand_off_is_not_at_the_contact_pose() {
         half_way >= s.settle_time - 1e-9,
         "0.6 m off the contact line the window opens after the settle time: {half_way}"
     );
+}
+
+/// The bullet's contact pose on `side` at the rear quarter, with `s`'s contact geometry.
+fn contact_pose(s: &PlannerSettings, side: mpc::reference::Side) -> mpc::reference::StageReference {
+    let p = common::params();
+    mpc::reference::pit_stage_at(
+        &p,
+        side,
+        mpc::reference::rear_quarter_x(&p),
+        s.contact_angle,
+        s.overlap,
+        s.push_speed,
+        (0.0, 0.0),
+    )
 }

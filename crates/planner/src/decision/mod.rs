@@ -524,7 +524,7 @@ impl Planner {
             };
             for oi in 0..offsets {
                 let t0 = t_arr + self.settings.start_offsets[oi];
-                let k0 = (t0 / self.settings.dt - 1e-9).ceil().max(0.0) as usize;
+                let k0 = self.settings.step_at(t0);
                 if k0 + self.w > self.n {
                     continue;
                 }
